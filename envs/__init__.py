@@ -1,0 +1,44 @@
+"""Memory Gym, natively batched: importing this package registers every environment id with gymnasium.
+
+``gymnasium.make("MortarMayhem-v0")`` gives the single-environment face and
+``gymnasium.make_vec("MortarMayhem-v0", num_envs=64)`` the native vector face of the same batched core.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+from envs.core import BatchedCore, MemoryGymEnv, MemoryGymVectorEnv, load_core
+
+__all__ = ["BatchedCore", "MemoryGymEnv", "MemoryGymVectorEnv", "ENV_IDS", "make_core"]
+
+# id -> (core class path, variant arguments of that family)
+ENV_IDS: dict[str, tuple[str, dict[str, Any]]] = {
+    "ProofOfMemory-v0": ("envs.proof_of_memory:ProofOfMemoryCore", {}),
+}
+
+
+def make_core(env_id: str, num_envs: int = 1, options: dict[str, Any] | None = None) -> BatchedCore:
+    """The batched core behind ``env_id`` with ``num_envs`` slots (what the trainer drives directly)."""
+    if env_id not in ENV_IDS:
+        raise ValueError(f"unknown environment id {env_id!r}; valid ids: {', '.join(ENV_IDS)}")
+    core, variant = ENV_IDS[env_id]
+    return load_core(core)(num_envs=num_envs, options=options, **variant)
+
+
+def _register_all() -> None:
+    for env_id, (core, variant) in ENV_IDS.items():
+        if env_id in gym.registry:
+            continue
+        gym.register(
+            id=env_id,
+            entry_point="envs.core:MemoryGymEnv",
+            vector_entry_point="envs.core:MemoryGymVectorEnv",
+            kwargs={"core": core, **variant},
+            disable_env_checker=False,
+        )
+
+
+_register_all()

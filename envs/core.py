@@ -1,0 +1,367 @@
+"""The natively batched environment core and its two gymnasium faces.
+
+A family (Mortar Mayhem, Mystery Path, ...) subclasses :class:`BatchedCore`. Its state lives in numpy arrays with a
+leading ``num_envs`` axis, and :meth:`BatchedCore.step` advances many slots with array operations. Only the reset
+of a slot runs per slot, in plain Python, because level generation must follow the reference's RNG call order:
+each slot owns a ``numpy.random.Generator(PCG64(SeedSequence(seed)))``, so slot k reset with seed s produces the
+same level as a single environment reset with seed s.
+
+Two faces wrap one core: :class:`MemoryGymEnv` (``gymnasium.make``, one slot) and :class:`MemoryGymVectorEnv`
+(``gymnasium.make_vec``, N slots, explicit autoreset mode). The trainer drives a core directly.
+
+What a family implements (``idx`` is ``slice(None)`` for all slots or an int array of slot indices):
+
+* ``option_specs`` (dict of :class:`~envs.options.Option`), ``single_observation_space``, ``single_action_space``;
+* ``_reset_slot(k, rng, opts)``: build slot k's level with the reference's RNG calls and draw its first frame;
+* ``_step(idx, actions) -> (rewards, terminated)``: advance the slots ``idx`` and draw their frames;
+* ``_observation(idx)``: the observation arrays of the slots (views are fine, the faces copy);
+* ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here);
+* optionally ``_step_info(k)`` (endless envs: ``ground_truth``), ``_debug_frame(k)`` and ``render_fps(k)``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from envs.options import Option, resolve_options
+
+Index = slice | np.ndarray
+RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
+DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
+
+
+def seeded_generator(seed: int) -> np.random.Generator:
+    """The generator the reference builds for ``reset(seed=s)``: PCG64 over a SeedSequence of the seed."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed)))
+
+
+class BatchedCore:
+    """State and mechanics of ``num_envs`` independent episodes of one environment family."""
+
+    env_name: ClassVar[str] = ""
+    option_specs: dict[str, Option]
+    single_observation_space: gym.Space
+    single_action_space: gym.Space
+    has_ground_truth_info: ClassVar[bool] = False
+    ground_truth_space: gym.Space | None = None
+    base_render_fps: ClassVar[int] = 25
+
+    def __init__(self, num_envs: int = 1, options: Mapping[str, Any] | None = None) -> None:
+        if not isinstance(num_envs, int | np.integer) or num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r} is invalid: expected an int >= 1")
+        self.num_envs = int(num_envs)
+        # Options given at construction become this instance's defaults; reset options apply to one episode.
+        self.base_options = resolve_options(self.option_specs, options, name=self.env_name)
+        self.rngs: list[np.random.Generator | None] = [None] * self.num_envs
+        self.seeds: list[int | None] = [None] * self.num_envs
+        self.slot_options: list[dict[str, Any]] = [dict(self.base_options) for _ in range(self.num_envs)]
+        self.episode_return = np.zeros(self.num_envs, dtype=np.float64)
+        self.episode_length = np.zeros(self.num_envs, dtype=np.int64)
+
+    # ----------------------------------------------------------------------------------------------- slot API
+    def resolve(self, options: Mapping[str, Any] | None) -> dict[str, Any]:
+        """Validate ``options`` and merge them over this instance's defaults."""
+        return resolve_options(self.option_specs, options, base=self.base_options, name=self.env_name)
+
+    def reset_slot(self, k: int, seed: int | None = None, options: Mapping[str, Any] | None = None) -> None:
+        """Start a new episode in slot ``k``. ``seed=None`` continues the slot's generator (OS entropy at first)."""
+        opts = self.resolve(options)  # validate before touching any state
+        if seed is not None:
+            if not isinstance(seed, int | np.integer) or seed < 0:
+                raise ValueError(f"seed={seed!r} is invalid: expected a non-negative int or None")
+            self.rngs[k] = seeded_generator(int(seed))
+            self.seeds[k] = int(seed)
+        elif self.rngs[k] is None:
+            self.rngs[k] = np.random.default_rng()
+        self.slot_options[k] = opts
+        self.episode_return[k] = 0.0
+        self.episode_length[k] = 0
+        self._reset_slot(k, self.rngs[k], opts)
+
+    def step(self, actions: np.ndarray, idx: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
+        """Advance slots ``idx`` (all when ``None``) by one step with ``actions`` (one row per stepped slot).
+
+        Returns the rewards and terminated flags of the stepped slots and the final infos of the slots whose episode
+        ended, keyed by slot index.
+        """
+        sel: Index = slice(None) if idx is None else np.asarray(idx, dtype=np.int64)
+        rewards, terminated = self._step(sel, np.asarray(actions))
+        self.episode_return[sel] += rewards
+        self.episode_length[sel] += 1
+        finals: dict[int, dict] = {}
+        if terminated.any():
+            slots = self.slots(sel)
+            for k in slots[terminated]:
+                k = int(k)
+                finals[k] = {"reward": float(self.episode_return[k]), "length": int(self.episode_length[k])}
+                finals[k].update(self._final_info(k))
+        return rewards, terminated, finals
+
+    def observations(self, idx: np.ndarray | None = None) -> np.ndarray | dict[str, np.ndarray]:
+        """Copies of the current observations of the slots ``idx`` (all when ``None``)."""
+        obs = self._observation(slice(None) if idx is None else np.asarray(idx, dtype=np.int64))
+        if isinstance(obs, dict):
+            return {key: np.array(v) for key, v in obs.items()}
+        return np.array(obs)
+
+    def step_info(self, k: int) -> dict[str, Any]:
+        """The info that every step and reset of slot ``k`` carries (empty except for the endless envs)."""
+        return self._step_info(k)
+
+    def debug_frame(self, k: int) -> np.ndarray:
+        """The 336x336 ground-truth picture of slot ``k``."""
+        frame = self._debug_frame(k)
+        return np.repeat(np.repeat(frame, DEBUG_SCALE, axis=0), DEBUG_SCALE, axis=1)
+
+    def agent_frame(self, k: int) -> np.ndarray:
+        """The 84x84 agent view of slot ``k`` (the visual observation)."""
+        obs = self._observation(np.array([k]))
+        image = obs["visual_observation"] if isinstance(obs, dict) else obs
+        return np.array(image[0])
+
+    def render_fps(self, k: int) -> int:
+        """Frames per second of the human window (some envs slow down while showing clues)."""
+        return self.base_render_fps
+
+    def slots(self, idx: Index) -> np.ndarray:
+        """Slot numbers selected by ``idx``."""
+        return np.arange(self.num_envs)[idx]
+
+    # ------------------------------------------------------------------------------------------ family hooks
+    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def _observation(self, idx: Index) -> np.ndarray | dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def _final_info(self, k: int) -> dict[str, Any]:
+        return {}
+
+    def _step_info(self, k: int) -> dict[str, Any]:
+        return {}
+
+    def _debug_frame(self, k: int) -> np.ndarray:
+        return self.agent_frame(k)
+
+
+def load_core(core: str | type[BatchedCore]) -> type[BatchedCore]:
+    """Resolve ``"module:Class"`` to a core class (the registry stores strings so specs stay picklable)."""
+    if isinstance(core, str):
+        module, _, name = core.partition(":")
+        return getattr(importlib.import_module(module), name)
+    return core
+
+
+class HumanWindow:
+    """A pygame window that shows the debug picture at the env's frame rate (created on first use)."""
+
+    def __init__(self) -> None:
+        import pygame
+
+        self.pygame = pygame
+        pygame.display.init()  # display only: initialising audio is slow and noisy on headless machines
+        self.screen: Any = None
+        self.clock = pygame.time.Clock()
+
+    def show(self, frame: np.ndarray, title: str, fps: int) -> None:
+        pg = self.pygame
+        size = (frame.shape[1], frame.shape[0])
+        if self.screen is None or self.screen.get_size() != size:
+            self.screen = pg.display.set_mode(size)
+        pg.event.pump()
+        pg.display.set_caption(title)
+        pg.surfarray.blit_array(self.screen, np.ascontiguousarray(frame.transpose(1, 0, 2)))
+        pg.display.flip()
+        self.clock.tick(fps)
+
+    def close(self) -> None:
+        # Only the display is closed: other instances in the process keep working (unlike the reference).
+        self.pygame.display.quit()
+
+
+def _check_render_mode(render_mode: str | None) -> None:
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode={render_mode!r} is invalid; valid render modes: None, {', '.join(RENDER_MODES)}")
+    if render_mode != "human":
+        os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+
+class MemoryGymEnv(gym.Env):
+    """The single-environment face: one slot of a batched core behind the ``gymnasium.Env`` API."""
+
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 25}
+
+    def __init__(
+        self,
+        core: str | type[BatchedCore],
+        render_mode: str | None = None,
+        options: Mapping[str, Any] | None = None,
+        **variant: Any,
+    ) -> None:
+        _check_render_mode(render_mode)
+        self.core = load_core(core)(num_envs=1, options=options, **variant)
+        self.observation_space = self.core.single_observation_space
+        self.action_space = self.core.single_action_space
+        self.render_mode = render_mode
+        self.metadata = {"render_modes": RENDER_MODES, "render_fps": self.core.base_render_fps}
+        self.has_ground_truth_info = self.core.has_ground_truth_info
+        self.ground_truth_space = self.core.ground_truth_space
+        self._window: HumanWindow | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+        super().reset(seed=seed)
+        self.core.reset_slot(0, seed, options)
+        self._np_random = self.core.rngs[0]  # env.np_random is the generator that builds the levels
+        if self.render_mode == "human":
+            self.render()
+        return self._obs(), self.core.step_info(0)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
+        rewards, terminated, finals = self.core.step(np.asarray(action)[None])
+        info = self.core.step_info(0)
+        info.update(finals.get(0, {}))
+        if self.render_mode == "human":
+            self.render()
+        return self._obs(), float(rewards[0]), bool(terminated[0]), False, info
+
+    def _obs(self) -> Any:
+        obs = self.core.observations(np.array([0]))
+        if isinstance(obs, dict):
+            return {key: v[0] for key, v in obs.items()}
+        return obs[0]
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode == "rgb_array":
+            return self.core.agent_frame(0)
+        if self.render_mode == "debug_rgb_array":
+            return self.core.debug_frame(0)
+        if self.render_mode == "human":
+            if self._window is None:
+                self._window = HumanWindow()
+            self._window.show(self.core.debug_frame(0), f"seed {self.core.seeds[0]}", self.core.render_fps(0))
+        return None
+
+    def close(self) -> None:
+        if self._window is not None:
+            self._window.close()
+            self._window = None
+
+
+class MemoryGymVectorEnv(gym.vector.VectorEnv):
+    """The native vector face: all slots of one batched core behind ``gymnasium.vector.VectorEnv``.
+
+    ``reset(seed=s)`` seeds slot k with ``s + k`` (a list gives one seed per slot), so slot k reproduces the
+    episode of a single env reset with that seed. Autoreset episodes continue each slot's generator, like
+    ``reset(seed=None)`` on a single env. ``options={"reset_mask": mask, ...}`` resets only the masked slots.
+    """
+
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 25, "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        core: str | type[BatchedCore],
+        num_envs: int = 1,
+        render_mode: str | None = None,
+        options: Mapping[str, Any] | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **variant: Any,
+    ) -> None:
+        _check_render_mode(render_mode)
+        self.core = load_core(core)(num_envs=num_envs, options=options, **variant)
+        self.num_envs = self.core.num_envs
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError as err:
+            valid = ", ".join(m.value for m in AutoresetMode)
+            raise ValueError(f"autoreset_mode={autoreset_mode!r} is invalid; valid modes: {valid}") from err
+        self.single_observation_space = self.core.single_observation_space
+        self.single_action_space = self.core.single_action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.render_mode = render_mode
+        self.metadata = {
+            "render_modes": RENDER_MODES,
+            "render_fps": self.core.base_render_fps,
+            "autoreset_mode": self.autoreset_mode,
+        }
+        self._needs_reset = np.zeros(self.num_envs, dtype=bool)
+
+    def reset(
+        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict]:
+        super().reset(seed=seed if isinstance(seed, int) else None)
+        options = dict(options or {})
+        mask = np.asarray(options.pop("reset_mask", np.ones(self.num_envs, dtype=bool)), dtype=bool)
+        if mask.shape != (self.num_envs,):
+            raise ValueError(f"reset_mask has shape {mask.shape}; expected ({self.num_envs},)")
+        seeds = self._slot_seeds(seed)
+        for k in np.flatnonzero(mask):
+            self.core.reset_slot(int(k), seeds[k], options)
+        self._needs_reset[mask] = False
+        infos: dict[str, Any] = {}
+        for k in np.flatnonzero(mask):
+            infos = self._add_info(infos, self.core.step_info(int(k)), int(k))
+        return self.core.observations(), infos
+
+    def _slot_seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
+        if seed is None:
+            return [None] * self.num_envs
+        if isinstance(seed, int | np.integer):
+            return [int(seed) + k for k in range(self.num_envs)]
+        seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"got {len(seeds)} seeds for {self.num_envs} environments")
+        return seeds
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
+        actions = np.asarray(actions)
+        n = self.num_envs
+        rewards = np.zeros(n, dtype=np.float64)
+        terminated = np.zeros(n, dtype=bool)
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
+            restart = np.flatnonzero(self._needs_reset)
+            live = np.flatnonzero(~self._needs_reset)
+            if live.size:
+                r, t, finals = self.core.step(actions[live], idx=live)
+                rewards[live], terminated[live] = r, t
+            else:
+                finals = {}
+            for k in restart:
+                self.core.reset_slot(int(k))
+        else:
+            rewards, terminated, finals = self.core.step(actions)
+            rewards = np.asarray(rewards, dtype=np.float64)
+        same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
+        final_obs = self.core.observations() if same_step and terminated.any() else None
+        for k in range(n):
+            info = self.core.step_info(k)
+            info.update(finals.get(k, {}))
+            if final_obs is not None and terminated[k]:
+                obs_k = {key: v[k] for key, v in final_obs.items()} if isinstance(final_obs, dict) else final_obs[k]
+                infos = self._add_info(infos, {"final_obs": obs_k, "final_info": info}, k)
+                self.core.reset_slot(k)
+                info = self.core.step_info(k)
+            if info:
+                infos = self._add_info(infos, info, k)
+        self._needs_reset = terminated.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
+        truncated = np.zeros(n, dtype=bool)
+        return self.core.observations(), rewards, terminated, truncated, infos
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        if self.render_mode == "rgb_array":
+            return tuple(self.core.agent_frame(k) for k in range(self.num_envs))
+        if self.render_mode == "debug_rgb_array":
+            return tuple(self.core.debug_frame(k) for k in range(self.num_envs))
+        return None

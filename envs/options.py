@@ -1,0 +1,101 @@
+"""Reset options: declared once per family, validated on every reset, applied to one episode only.
+
+Each family lists its options as :class:`Option` specs (the reference's names and defaults). Unknown keys and values
+of the wrong type or outside the valid range raise ``ValueError`` naming the key and what would have been valid.
+"""
+
+from __future__ import annotations
+
+import difflib
+import numbers
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+KINDS = ("int", "float", "bool", "int_list", "float_list")
+
+
+@dataclass(frozen=True)
+class Option:
+    """One reset option: its default, its kind and its valid range (bounds inclusive, ``None`` = unbounded)."""
+
+    default: Any
+    kind: str
+    low: float | None = None
+    high: float | None = None
+    allow_empty: bool = False
+    doc: str = ""
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"Option kind {self.kind!r} is not one of {KINDS}")
+
+    def describe(self) -> str:
+        """A short description of the valid values, used in error messages."""
+        bounds = ""
+        if self.low is not None or self.high is not None:
+            lo = "-inf" if self.low is None else f"{self.low:g}"
+            hi = "inf" if self.high is None else f"{self.high:g}"
+            bounds = f" in [{lo}, {hi}]"
+        return {
+            "int": f"an int{bounds}",
+            "float": f"a number{bounds}",
+            "bool": "a bool",
+            "int_list": f"a {'' if self.allow_empty else 'non-empty '}list of ints{bounds}",
+            "float_list": f"a {'' if self.allow_empty else 'non-empty '}list of numbers{bounds}",
+        }[self.kind]
+
+    def _in_range(self, v: float) -> bool:
+        return (self.low is None or v >= self.low) and (self.high is None or v <= self.high)
+
+    def validate(self, key: str, value: Any) -> Any:
+        """Return the value in canonical form (python int/float/bool/list) or raise ``ValueError``."""
+        bad = ValueError(f"option {key!r}={value!r} is invalid: expected {self.describe()}")
+        if self.kind == "bool":
+            if isinstance(value, bool | _np_bool()):
+                return bool(value)
+            raise bad
+        if self.kind in ("int", "float"):
+            return self._scalar(value, self.kind, bad)
+        if not isinstance(value, list | tuple) or (not value and not self.allow_empty):
+            raise bad
+        scalar_kind = "int" if self.kind == "int_list" else "float"
+        return [self._scalar(v, scalar_kind, bad) for v in value]
+
+    def _scalar(self, value: Any, kind: str, bad: ValueError) -> int | float:
+        if isinstance(value, bool | _np_bool()) or not isinstance(value, numbers.Real):
+            raise bad
+        if kind == "int":
+            if not isinstance(value, numbers.Integral):
+                raise bad
+            value = int(value)
+        else:
+            value = float(value) if not isinstance(value, numbers.Integral) else value
+        if not self._in_range(value):
+            raise bad
+        return value
+
+
+def _np_bool() -> type:
+    import numpy as np
+
+    return np.bool_
+
+
+def resolve_options(
+    specs: Mapping[str, Option], options: Mapping[str, Any] | None, base: Mapping[str, Any] | None = None, name: str = ""
+) -> dict[str, Any]:
+    """Merge ``options`` over ``base`` (or the spec defaults) after validating every key and value."""
+    merged = {k: _copy(spec.default) for k, spec in specs.items()} if base is None else {k: _copy(v) for k, v in base.items()}
+    for key, value in (options or {}).items():
+        if key not in specs:
+            close = difflib.get_close_matches(str(key), list(specs), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            where = f" for {name}" if name else ""
+            raise ValueError(f"unknown option {key!r}{where}{hint}; valid options: {', '.join(sorted(specs))}")
+        merged[key] = specs[key].validate(key, value)
+    return merged
+
+
+def _copy(value: Any) -> Any:
+    return list(value) if isinstance(value, list) else value
