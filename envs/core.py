@@ -86,7 +86,9 @@ class BatchedCore:
         self.episode_length[k] = 0
         self._reset_slot(k, self.rngs[k], opts)
 
-    def step(self, actions: np.ndarray, idx: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
+    def step(
+        self, actions: np.ndarray, idx: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
         """Advance slots ``idx`` (all when ``None``) by one step with ``actions`` (one row per stepped slot).
 
         Returns the rewards and terminated flags of the stepped slots and the final infos of the slots whose episode

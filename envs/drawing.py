@@ -8,7 +8,7 @@ pixel) exactly once per process, and cached as small ``(rgb, mask)`` pairs. Fram
 from __future__ import annotations
 
 import os
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -65,7 +65,7 @@ def blend(dst: np.ndarray, src: np.ndarray | int, alpha: int) -> np.ndarray:
     return (d + np.trunc((np.asarray(src, dtype=np.int32) - d) * a / 255).astype(np.int32)).astype(np.uint8)
 
 
-@lru_cache(maxsize=None)
+@cache
 def disc_mask(radius: int) -> tuple[np.ndarray, int]:
     """Pixels of pygame's filled circle of ``radius`` around an integer centre: (mask, offset of its top-left)."""
     size = 2 * radius + 2
@@ -77,7 +77,7 @@ def disc_mask(radius: int) -> tuple[np.ndarray, int]:
     return mask, -radius
 
 
-@lru_cache(maxsize=None)
+@cache
 def agent_sprites(scale: float = 0.25) -> tuple[Sprite, ...]:
     """The agent's eight sprites, indexed by ``heading // 45`` (heading 0 = hands up, growing counter-clockwise).
 

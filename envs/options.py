@@ -83,10 +83,17 @@ def _np_bool() -> type:
 
 
 def resolve_options(
-    specs: Mapping[str, Option], options: Mapping[str, Any] | None, base: Mapping[str, Any] | None = None, name: str = ""
+    specs: Mapping[str, Option],
+    options: Mapping[str, Any] | None,
+    base: Mapping[str, Any] | None = None,
+    name: str = "",
 ) -> dict[str, Any]:
     """Merge ``options`` over ``base`` (or the spec defaults) after validating every key and value."""
-    merged = {k: _copy(spec.default) for k, spec in specs.items()} if base is None else {k: _copy(v) for k, v in base.items()}
+    merged = (
+        {k: _copy(spec.default) for k, spec in specs.items()}
+        if base is None
+        else {k: _copy(v) for k, v in base.items()}
+    )
     for key, value in (options or {}).items():
         if key not in specs:
             close = difflib.get_close_matches(str(key), list(specs), n=1)
