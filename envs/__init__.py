@@ -17,6 +17,8 @@ __all__ = ["BatchedCore", "MemoryGymEnv", "MemoryGymVectorEnv", "ENV_IDS", "make
 # id -> (core class path, variant arguments of that family)
 ENV_IDS: dict[str, tuple[str, dict[str, Any]]] = {
     "ProofOfMemory-v0": ("envs.proof_of_memory:ProofOfMemoryCore", {}),
+    "SearingSpotlights-v0": ("envs.searing_spotlights:SearingSpotlightsCore", {"endless": False}),
+    "Endless-SearingSpotlights-v0": ("envs.searing_spotlights:SearingSpotlightsCore", {"endless": True}),
 }
 
 
