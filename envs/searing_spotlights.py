@@ -34,7 +34,7 @@ import numpy as np
 
 from envs.core import BatchedCore, Index
 from envs.drawing import KEY_BLUE, Sprite, agent_sprites, disc_mask, pygame, surface_to_sprite
-from envs.movement import clamp_centre, continuous_heading, continuous_velocity
+from envs.movement import continuous_heading, continuous_velocity
 from envs.options import Option
 
 SCREEN = 84
@@ -140,13 +140,16 @@ class Planes:
         self.half_h, self.half_w = centre  # the sprite's anchor (its centre pixel) inside the canvas
 
     def paste(self, rows: np.ndarray, x: int, y: int, where: np.ndarray | None = None) -> None:
-        """Paste with the anchor at pixel (x, y), clipped; ``where`` (84, 252 of 0/255) restricts the pixels."""
+        """Paste with the anchor at pixel (x, y), clipped, into (..., 84, 252) rows.
+
+        ``where`` ((84, 252) of 0/255) restricts the pasted pixels.
+        """
         top, left = int(y) - self.half_h, int(x) - self.half_w
         r0, c0 = max(top, 0), max(left, 0)
         r1, c1 = min(top + self.height, SCREEN), min(left + self.width, SCREEN)
         if r0 >= r1 or c0 >= c1:
             return
-        target = rows[r0:r1, 3 * c0 : 3 * c1]
+        target = rows[..., r0:r1, 3 * c0 : 3 * c1]
         sr, sc = slice(r0 - top, r1 - top), slice(3 * (c0 - left), 3 * (c1 - left))
         mask = self.mask[sr, sc]
         if where is not None:
@@ -214,29 +217,46 @@ def span_rows() -> np.ndarray:
     return table
 
 
-@cache
-def disc_span_tables(max_radius: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Per radius, the rows of a filled disc as span codes, for every (clamped) centre column.
+class HoleTables:
+    """Per radius r and integer centre coordinate c, the rows of pygame's filled disc as flat table rows.
 
-    Returns ``codes[r, cx + max_radius + 1, j]`` (the span code of disc row j, 0 when it is empty or off-screen),
-    ``row_offset[r, j]`` (that row's offset from the centre row; far off-screen for j >= 2r) and the column
-    clamp bound: centres further left or right than that are entirely off-screen, as are their clamped copies.
+    Row ``r * width + c - low`` of ``codes`` holds, for each disc row j (of 2 * max_radius), the span code of that
+    row for a centre column c (0 when the row is empty or off-screen); the same row of ``rows`` holds the screen row
+    for a centre row c (0 when it is under the HUD or off-screen, row 0 is never a hole). Spotlight centres stay
+    within ``SPOT_ORBIT + radius`` of the screen centre, so ``[low, low + width)`` covers every reachable one.
     """
-    rows = 2 * max_radius
-    columns = np.arange(-max_radius - 1, SCREEN + max_radius + 1)
-    codes = np.zeros((max_radius + 1, columns.size, rows), dtype=np.intp)
-    row_offset = np.full((max_radius + 1, rows), -(10**6), dtype=np.intp)
-    for radius in range(1, max_radius + 1):
-        mask, offset = disc_mask(radius)
-        for j in range(2 * radius):
-            filled = np.flatnonzero(mask[j])
-            lo = columns + filled[0] + offset
-            hi = columns + filled[-1] + offset
-            visible = (hi >= 0) & (lo < SCREEN)
-            lo, hi = np.clip(lo, 0, SCREEN - 1), np.clip(hi, 0, SCREEN - 1)
-            codes[radius, :, j] = np.where(visible, span_code(lo, hi), 0)
-            row_offset[radius, j] = j + offset
-    return codes, row_offset, max_radius + 1
+
+    def __init__(self, max_radius: int) -> None:
+        reach = math.ceil(SPOT_ORBIT + max_radius) + 1
+        self.max_radius = max_radius
+        self.low = CENTRE - reach
+        self.width = 2 * reach + 1
+        centres = np.arange(self.low, self.low + self.width)
+        depth = 2 * max_radius
+        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.int16)
+        self.rows = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.intp)
+        for radius in range(1, max_radius + 1):
+            mask, offset = disc_mask(radius)
+            block = slice(radius * self.width, (radius + 1) * self.width)
+            for j in range(2 * radius):
+                filled = np.flatnonzero(mask[j])
+                lo, hi = centres + filled[0] + offset, centres + filled[-1] + offset
+                visible = (hi >= 0) & (lo < SCREEN)
+                code = span_code(np.clip(lo, 0, SCREEN - 1), np.clip(hi, 0, SCREEN - 1))
+                self.codes[block, j] = np.where(visible, code, 0)
+                row = centres + j + offset
+                self.rows[block, j] = np.where((row >= HUD_ROWS) & (row < SCREEN), row, 0)
+        for table in (self.codes, self.rows):
+            table.setflags(write=False)
+
+    def base(self, radius: np.ndarray | int) -> np.ndarray | int:
+        """Offset that turns a spotlight's integer centre coordinate into its table row."""
+        return radius * self.width - self.low
+
+
+@cache
+def hole_tables(max_radius: int) -> HoleTables:
+    return HoleTables(max_radius)
 
 
 # ------------------------------------------------------------------------------------------------ blending
@@ -341,6 +361,128 @@ def draw_order(entities: list[tuple[str, int, bool]]) -> tuple[tuple[str, ...], 
     return tuple(layers[darkness + 1 : hud]), tuple(layers[hud + 1 :])
 
 
+# Heading index (heading // 45; -1: unchanged) per action code ``3 * horizontal + vertical``.
+ACTION_PAIRS = np.array([(h, v) for h in range(3) for v in range(3)])
+ACTION_HEADING = np.where(
+    continuous_heading(ACTION_PAIRS, np.full(9, -1)) < 0, -1, continuous_heading(ACTION_PAIRS, np.zeros(9, int)) // 45
+)
+NO_HOLES = np.zeros((1, SCREEN, ROW_BYTES), np.uint8)
+NO_HOLES.setflags(write=False)
+ROW = np.dtype((np.void, ROW_BYTES))  # one frame row as a single item, for fast row gathers and scatters
+NEVER = np.iinfo(np.int64).max
+
+
+class AgentPixels:
+    """The agent's opaque pixels per heading, as offsets from its centre and colours (padded to equal length)."""
+
+    def __init__(self, scale: float) -> None:
+        offsets, colours = [], []
+        for planes in agent_planes(scale):
+            ys, xs = np.nonzero(planes.mask[:, ::3])
+            offsets.append((ys - planes.half_h, xs - planes.half_w))
+            colours.append(planes.rgb.reshape(planes.height, planes.width, 3)[ys, xs])
+        count = max(len(dy) for dy, _ in offsets)
+        pad = [count - len(dy) for dy, _ in offsets]  # repeat the first pixel: writing it twice changes nothing
+        self.dy = np.stack([np.pad(dy, (0, p), mode="edge") for (dy, _), p in zip(offsets, pad, strict=True)])
+        self.dx = np.stack([np.pad(dx, (0, p), mode="edge") for (_, dx), p in zip(offsets, pad, strict=True)])
+        self.colour = np.stack([np.pad(c, ((0, p), (0, 0)), mode="edge") for c, p in zip(colours, pad, strict=True)])
+        self.extent = float(np.hypot(self.dy, self.dx).max())  # farthest pixel from the centre
+
+    def paste(
+        self, frames: np.ndarray, local: np.ndarray, x: np.ndarray, y: np.ndarray, sprite: np.ndarray, where=None
+    ) -> None:
+        """Paste agents into ``frames`` ((m, 84, 252) rows) at the frames ``local``, centred on (x, y).
+
+        ``sprite`` is the heading index (heading // 45) of each; ``where`` ((m, 84, 252) of 0/255) restricts the
+        pixels (the holes, for an agent under the darkness).
+        """
+        px = x[:, None] + self.dx[sprite]
+        py = y[:, None] + self.dy[sprite]
+        inside = (px.view(np.uint64) < SCREEN) & (py.view(np.uint64) < SCREEN)
+        pixel = (local[:, None] * SCREEN + py) * SCREEN + px
+        if where is not None:
+            inside &= where.reshape(-1, 3)[np.where(inside, pixel, 0), 0] != 0
+        frames.reshape(-1, 3)[pixel[inside]] = self.colour[sprite][inside]
+
+
+@cache
+def agent_pixels(scale: float) -> AgentPixels:
+    return AgentPixels(scale)
+
+
+# Per-episode settings of a slot, derived once per distinct set of options (see ``_episode_settings``).
+SETTINGS = np.dtype(
+    [
+        ("end_t", np.int64),  # max_steps, or never
+        ("pos_low", np.int64, (2,)),  # the agent centre is clamped into [low, high] (x, y)
+        ("pos_high", np.int64, (2,)),
+        ("vel", np.int64, (9, 2)),  # (dx, dy) per action code
+        ("agent_radius", np.int64),
+        ("agent_scale", np.float64),
+        ("agent_near", np.float64),  # agent sprite extent + 2.5 (hole raster and centre truncation); -1: visible
+        ("max_health", np.float64),
+        ("spot_damage", np.float64),
+        ("reward_inside", np.float64),
+        ("reward_outside", np.float64),
+        ("reward_death", np.float64),
+        ("reward_coin", np.float64),
+        ("reward_exit", np.float64),
+        ("floor_kind", np.int64),
+        ("red_feedback", bool),  # visual_feedback on a chessboard floor
+        ("rings", bool),  # black_background: spotlights get a white outline
+        ("blend_below", np.int64),  # frames are blended while alpha < this (256 with rings: always)
+        ("dim_step", np.int64),  # alpha increase per step (0: the alpha stays at the threshold)
+        ("light_threshold", np.int64),
+        ("spawn_interval", np.int64),
+        ("hud_flags27", np.int64),  # 27 * (4 * endless + 2 * show_last_action + show_last_positive_reward)
+        ("agent_hidden", bool),
+        ("any_visible", bool),  # some entity is drawn above the darkness
+        ("coins_visible", bool),
+        ("coin_show_duration", np.int64),
+        ("steps_per_coin", np.int64),
+        ("use_exit", bool),
+        ("coin_scale", np.float64),
+        ("coin_reach", np.int64),  # coin radius + agent radius
+        ("exit_scale", np.float64),
+        ("exit_reach", np.float64),  # exit radius + agent radius
+    ]
+)
+
+# A slot's spotlights in list order. An unused position is never drawn (radius 0), never hits (negative reach),
+# never moves (speed 0) and sits at the screen centre, inside the hole tables.
+SPOTS = np.dtype(
+    [
+        ("radius", np.int64),
+        ("base", np.intp),  # hole table offset of the radius
+        ("reach", np.float64),  # hit distance: radius + agent radius
+        ("near", np.float64),  # distance within which the hole may overlap the (hidden) agent's sprite
+        ("speed", np.float64),
+        ("tau", np.float64),
+        ("start", np.complex128),
+        ("target", np.complex128),
+        ("offset", np.complex128),
+        ("centre", np.complex128),  # where it was drawn in the last step
+        ("done", bool),
+        ("listed", bool),
+        ("drawn", bool),
+    ]
+)
+
+# Bits of the per-slot item map: which coins (bits 0..9) and whether the exit (bit 14) touch an agent centred on a
+# pixel; bit 15 asks for the exit to open at the next step (no coins at all).
+EXIT_BIT, OPEN_EXIT_BIT = 1 << 14, 1 << 15
+
+
+def _disc_pixels(x: int, y: int, reach: float) -> tuple[slice, slice, np.ndarray]:
+    """The pixels whose distance to (x, y) is at most ``reach``, computed like pygame's distance_to (sqrt)."""
+    r = int(math.floor(reach))
+    rows = slice(max(y - r, 0), min(y + r + 1, SCREEN))
+    cols = slice(max(x - r, 0), min(x + r + 1, SCREEN))
+    dy = np.arange(rows.start, rows.stop)[:, None] - y
+    dx = np.arange(cols.start, cols.stop)[None, :] - x
+    return rows, cols, np.sqrt(dx * dx + dy * dy) <= reach
+
+
 class SearingSpotlightsCore(BatchedCore):
     """Both Searing Spotlights variants; ``endless=True`` gives ``Endless-SearingSpotlights-v0``."""
 
@@ -359,73 +501,42 @@ class SearingSpotlightsCore(BatchedCore):
         super().__init__(num_envs, options)
         self.resolve(None)  # cross-checks of the constructor options
         n = self.num_envs
-        f64, i64 = np.float64, np.int64
-        # episode settings (from the options of each slot's current episode)
-        self.max_steps = np.zeros(n, i64)
-        self.agent_speed = np.zeros(n, f64)
-        self.agent_radius = np.zeros(n, i64)
-        self.agent_reach = np.zeros(n, i64)
-        self.any_visible = np.zeros(n, bool)  # some entity is drawn above the darkness (or the HUD)
-        self.agent_scale = np.zeros(n, f64)
-        self.max_health = np.ones(n, f64)
-        self.spot_damage = np.zeros(n, f64)
-        self.reward_inside = np.zeros(n, f64)
-        self.reward_outside = np.zeros(n, f64)
-        self.reward_death = np.zeros(n, f64)
-        self.reward_coin = np.zeros(n, f64)
-        self.reward_exit = np.zeros(n, f64)
-        self.red_feedback = np.zeros(n, bool)  # visual_feedback on a chessboard floor
-        self.floor_kind = np.zeros(n, i64)
-        self.rings = np.zeros(n, bool)  # black_background: spotlights get a white outline
-        self.dim_step = np.zeros(n, i64)  # alpha increase per step (0: jump to the threshold)
-        self.light_threshold = np.zeros(n, i64)
-        self.spawn_interval = np.zeros(n, i64)
-        self.spawns_left = np.zeros(n, i64)  # Searing Spotlights: later spawns still allowed
-        self.hud_flags = np.zeros(n, i64)  # 4 * endless + 2 * show_action + show_reward
-        self.agent_hidden = np.ones(n, bool)
-        self.coins_visible = np.zeros(n, bool)
-        self.coin_show_duration = np.zeros(n, i64)
-        self.steps_per_coin = np.zeros(n, i64)
-        self.use_exit = np.zeros(n, bool)
-        self.coin_scale = np.zeros(n, f64)
-        self.coin_radius = np.zeros(n, i64)
-        self.exit_scale = np.zeros(n, f64)
-        self.exit_reach = np.zeros(n, f64)  # exit radius + agent radius
-        self.num_coins = np.zeros(n, i64)
+        self.all_slots = np.arange(n)
+        self.settings = np.zeros(n, SETTINGS)
+        for name in SETTINGS.names:  # attribute views of the settings columns
+            setattr(self, name, self.settings[name])
         self.orders: list[dict[bool, tuple[tuple[str, ...], tuple[str, ...]]]] = [{} for _ in range(n)]
+        self._settings_cache: dict[tuple, tuple[np.void, dict]] = {}
         # episode state
-        self.t = np.zeros(n, i64)
-        self.alpha = np.zeros(n, i64)
-        self.x = np.zeros(n, i64)
-        self.y = np.zeros(n, i64)
-        self.heading = np.zeros(n, i64)
-        self.sprite_heading = np.zeros(n, i64)  # 0 (facing up) in the reset frame, then the heading
-        self.health = np.zeros(n, f64)
-        # The HUD lags one step: it shows the previous action and whether the previous reward was positive.
-        self.hud_action = np.zeros((n, 2), i64)  # shown in the current frame
-        self.hud_reward = np.zeros(n, i64)  # shown now: 0 none yet (reset frame), 1 not positive, 2 positive
-        self.last_action = np.zeros((n, 2), i64)  # shown from the next step on
-        self.last_reward = np.zeros(n, i64)
+        i64 = np.int64
+        for name in (
+            "t end_t_now alpha heading next_spawn spawns_left coins_collected coins_left num_coins "
+            "coin_shown_until success exit_x exit_y next_hud"
+        ).split():
+            setattr(self, name, np.zeros(n, i64))
+        self.pos = np.zeros((n, 2), i64)  # agent centre (x, y)
+        self.x, self.y = self.pos[:, 0], self.pos[:, 1]
+        self.health = np.zeros(n, np.float64)
+        self.hud_red = np.zeros(n, i64)  # width of the red (lost health) part of the bar
+        self.hud = np.zeros((n, ROW_BYTES), np.uint8)  # the HUD row of the current frame
         self.hit = np.zeros(n, bool)
-        self.spawn_timer = np.zeros(n, i64)
-        self.coins_collected = np.zeros(n, i64)
-        self.coin_t = np.zeros(n, i64)
-        self.success = np.zeros(n, i64)
         self.exit_open = np.zeros(n, bool)
-        self.exit_x = np.zeros(n, i64)
-        self.exit_y = np.zeros(n, i64)
+        self.goal_without_exit = np.zeros(n, bool)  # no exit: the episode ends with the last coin
         self.coin_x = np.zeros((n, 1), i64)
         self.coin_y = np.zeros((n, 1), i64)
         self.coin_alive = np.zeros((n, 1), bool)
-        # spotlights, in list order per slot (capacity grows on demand)
+        self.item_map = np.zeros((n, SCREEN, SCREEN), np.uint16)  # see EXIT_BIT
+        # spotlights (the list capacity grows on demand)
+        self.tables = hole_tables(int(self.base_options["spot_max_radius"]))
+        self.unused_spot = self._unused_spot_record()
+        self.spots = np.zeros((n, 0), SPOTS)
         self.spot_count = np.zeros(n, i64)
-        self._allocate_spots(8)
-        # pictures
+        self._grow_spots(8)
+        # pictures, as (84, 252) rows per slot
         self.frames = np.zeros((n, SCREEN, ROW_BYTES), np.uint8)
-        self.lit = np.zeros((2, n, SCREEN, ROW_BYTES), np.uint8)  # floor + coins + exit, blue and red floor
-        self.holes = np.zeros((n * SCREEN, ROW_BYTES), np.uint8)  # 0/255 hole masks of the last drawn slots
-        self.span_index = np.zeros(n * SCREEN + 1, np.intp)  # per frame row: a span code; the last is a dump
-        self.max_radius = 13
+        self.lit = np.zeros((2, n, SCREEN, ROW_BYTES), np.uint8)  # floor + coins + exit; blue and red floor
+        self.holes = np.zeros((n * SCREEN, ROW_BYTES), np.uint8)  # 0/255 hole masks of the stepped slots
+        self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: the span code gathered into ``holes``
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
@@ -435,170 +546,192 @@ class SearingSpotlightsCore(BatchedCore):
                 raise ValueError(f"option {low!r}={opts[low]!r} is invalid: expected a value <= {high}={opts[high]!r}")
         return opts
 
-    def _allocate_spots(self, capacity: int) -> None:
-        n, old = self.num_envs, getattr(self, "spot_radius", None)
-        fields = {
-            "spot_radius": np.int64,
-            "spot_speed": np.float64,
-            "spot_tau": np.float64,
-            "spot_done": bool,
-            "spot_start": np.complex128,
-            "spot_target": np.complex128,
-            "spot_offset": np.complex128,
-            "spot_cx": np.int64,  # where the hole was drawn in the last step (for the debug view)
-            "spot_cy": np.int64,
-            "spot_drawn": bool,
-        }
-        for name, dtype in fields.items():
-            array = np.zeros((n, capacity), dtype)
-            if old is not None:
-                previous = getattr(self, name)
-                array[:, : previous.shape[1]] = previous
-            setattr(self, name, array)
-        self.spot_capacity = capacity
-        self.spot_slots = np.arange(capacity)
+    def _episode_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
+        """The settings record and draw orders for ``opts`` (cached: most episodes share their options)."""
+        key = tuple(tuple(v) if isinstance(v, list) else v for v in opts.values())
+        cached = self._settings_cache.get(key)
+        if cached is None:
+            if len(self._settings_cache) > 256:
+                self._settings_cache.clear()
+            cached = self._settings_cache[key] = self._derive_settings(opts)
+        return cached
+
+    def _derive_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
+        endless = self.endless
+        record = np.zeros((), SETTINGS)
+        radius = int(25 * opts["agent_scale"])
+        record["end_t"] = opts["max_steps"] if opts["max_steps"] > 0 else NEVER
+        record["agent_radius"] = radius
+        record["pos_low"] = radius, HUD_ROWS + radius
+        record["pos_high"] = SCREEN - radius, SCREEN - radius
+        vx, vy = continuous_velocity(ACTION_PAIRS, np.full(9, float(opts["agent_speed"])))
+        record["vel"] = np.stack([vx, vy], axis=1)
+        record["agent_scale"] = opts["agent_scale"]
+        extent = agent_pixels(float(opts["agent_scale"])).extent
+        record["agent_near"] = -1.0 if opts["agent_visible"] else extent + 2.5
+        record["max_health"] = opts["agent_health"]
+        record["spot_damage"] = opts["spot_damage"]
+        record["reward_inside"] = opts["reward_inside_spotlight"]
+        record["reward_outside"] = opts["reward_outside_spotlight"]
+        record["reward_death"] = opts["reward_death"]
+        record["reward_coin"] = opts["reward_coin"]
+        if opts["black_background"]:
+            record["floor_kind"] = FLOOR_BLACK
+        elif opts["hide_chessboard"]:
+            record["floor_kind"] = FLOOR_WHITE
+        else:
+            record["floor_kind"] = FLOOR_CHESS
+        record["red_feedback"] = opts["visual_feedback"] and record["floor_kind"] == FLOOR_CHESS
+        record["rings"] = opts["black_background"]
+        record["blend_below"] = 256 if opts["black_background"] else 255
+        duration = opts["light_dim_off_duration"]
+        record["dim_step"] = int(255 / duration) if duration > 0 else 0
+        record["light_threshold"] = opts["light_threshold"]
+        record["agent_hidden"] = not opts["agent_visible"]
+        record["coins_visible"] = opts["coins_visible"]
+        record["coin_scale"] = opts["coin_scale"]
+        record["coin_reach"] = int(10 * opts["coin_scale"]) + radius
+        record["any_visible"] = opts["agent_visible"] or opts["coins_visible"] or opts.get("exit_visible", False)
+        record["hud_flags27"] = 27 * (4 * endless + 2 * opts["show_last_action"] + opts["show_last_positive_reward"])
+        agent = ("agent", 3, opts["agent_visible"])
+        if endless:
+            record["spawn_interval"] = opts["spawn_interval"]
+            record["steps_per_coin"] = opts["steps_per_coin"] if opts["steps_per_coin"] > 0 else NEVER
+            record["coin_show_duration"] = opts["coin_show_duration"]
+            orders = {visible: draw_order([("coins", 1, visible), agent]) for visible in (False, True)}
+        else:
+            # The reference reads the first entry of its interval list and pops the last: a constant interval
+            # (an interval below 1 spawns in every step, like 1).
+            record["spawn_interval"] = max(int(opts["initial_spawn_interval"] + opts["spawn_interval_threshold"]), 1)
+            record["use_exit"] = opts["use_exit"]
+            record["exit_scale"] = opts["exit_scale"]
+            record["exit_reach"] = 20 / 2 * opts["exit_scale"] + radius
+            record["reward_exit"] = opts["reward_exit"]
+            entities = [("coins", 1, opts["coins_visible"]), ("exit", 2, opts["exit_visible"]), agent]
+            if not opts["use_exit"]:
+                entities.pop(1)  # no exit at all (the reference would draw a stale one, or fail)
+            order = draw_order(entities)
+            orders = {False: order, True: order}
+        return record[()], orders
+
+    # ------------------------------------------------------------------------------------------- spotlights
+    def _unused_spot_record(self) -> np.void:
+        record = np.zeros((), SPOTS)
+        record["base"] = self.tables.base(0)
+        record["reach"] = record["near"] = -1.0
+        record["start"] = record["target"] = record["offset"] = record["centre"] = complex(CENTRE, CENTRE)
+        return record[()]
+
+    def _grow_spots(self, capacity: int) -> None:
+        grown = np.full((self.num_envs, capacity), self.unused_spot, SPOTS)
+        grown[:, : self.spots.shape[1]] = self.spots
+        self.spots = grown
+
+    def _use_tables(self, max_radius: int) -> None:
+        """Switch to hole tables that cover ``max_radius`` (the spotlights' table offsets are recomputed)."""
+        if max_radius > self.tables.max_radius:
+            self.tables = hole_tables(max_radius)
+            self.unused_spot = self._unused_spot_record()
+            self.spots["base"] = self.tables.base(self.spots["radius"])
+
+    def _new_spot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> tuple:
+        """A spotlight record: radius, speed, then the three angles (the reference's 5 draws, in its order)."""
+        radius = int(rng.integers(opts["spot_min_radius"], opts["spot_max_radius"] + 1))
+        speed = rng.uniform(opts["spot_min_speed"], opts["spot_max_speed"])
+        start = rng.integers(0, 360)
+        target = start + 180 + rng.integers(-45, 45)
+        offset = target + rng.integers(-135, 135)
+        orbit = SPOT_ORBIT + radius
+        centre = pygame.math.Vector2(CENTRE, CENTRE)
+        points = []
+        for angle in (start, target, offset):  # pygame's rotation, for the reference's exact floats
+            point = centre + pygame.math.Vector2(orbit, 0).rotate(float(angle))
+            points.append(complex(point.x, point.y))
+        reach = radius + float(self.agent_radius[k])
+        near = radius + float(self.agent_near[k]) if self.agent_near[k] >= 0 else -1.0
+        return (radius, self.tables.base(radius), reach, near, speed, 0.0, *points, points[0], False, True, False)
+
+    def _append_spot(self, k: int) -> None:
+        j = int(self.spot_count[k])
+        if j == self.spots.shape[1]:
+            self._grow_spots(2 * j)
+        self.spots[k, j] = self._new_spot(k, self.rngs[k], self.slot_options[k])
+        self.spot_count[k] = j + 1
 
     # --------------------------------------------------------------------------------------------- reset
     def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
-        self._apply_options(k, opts)
+        record, self.orders[k] = self._episode_settings(opts)
+        self.settings[k] = record
+        self._use_tables(int(opts["spot_max_radius"]))
         self.t[k] = 0
+        self.end_t_now[k] = record["end_t"]
         self.alpha[k] = 0 if opts["light_dim_off_duration"] > 0 else opts["light_threshold"]
         self.hit[k] = False
-        self.hud_action[k] = 0
-        self.hud_reward[k] = 0
-        self.last_action[k] = 0
-        self.last_reward[k] = 1  # the reference starts from a last reward of 0.0
-        self.spawn_timer[k] = 0
-        self.coins_collected[k] = 0
-        self.coin_t[k] = 0
-        self.success[k] = 0
+        self.hud_red[k] = 0
+        self.next_spawn[k] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
+        self.spawns_left[k] = 0 if self.endless else opts["num_spawns"]
+        self.coins_collected[k] = self.success[k] = 0
+        self.coin_shown_until[k] = record["coin_show_duration"]
         self.exit_open[k] = False
         mask = np.zeros((SCREEN, SCREEN), bool)
-        self.heading[k] = 45 * int(rng.integers(0, 8))  # rng.choice over the 8 headings draws exactly this
-        self.sprite_heading[k] = 0
+        self.heading[k] = int(rng.integers(0, 8))  # heading index (x 45 degrees): what rng.choice draws
         if opts["sample_agent_position"]:
             x, y = sample_position(mask, rng, AGENT_BLOCK)
             x, y = x + int(rng.integers(2, 4)), y + int(rng.integers(2, 4))  # not clamped (kept quirk)
         else:
             x, y = CENTRE, CENTRE
             block_position(mask, x, y, ITEM_BLOCK)
-        self.x[k], self.y[k] = x, y
+        self.pos[k] = x, y
         self.health[k] = opts["agent_health"]
-        self.spot_count[k] = 0
-        self.spot_done[k] = False
-        self.spot_drawn[k] = False
-        for _ in range(opts["initial_spawns"]):
-            self._spawn_spot(k, rng, opts)
+        count = opts["initial_spawns"]
+        if count > self.spots.shape[1]:
+            self._grow_spots(max(count, 2 * self.spots.shape[1]))
+        spots = self.spots[k]
+        spots[:] = self.unused_spot
+        spots[:count] = [self._new_spot(k, rng, opts) for _ in range(count)]
+        self.spot_count[k] = count
+        self.item_map[k] = 0
         if self.endless:
-            self._ensure_coin_capacity(1)
-            self.coin_alive[k] = False
-            self.num_coins[k] = 1
+            self.num_coins[k] = self.coins_left[k] = 1
             self._spawn_endless_coin(k, rng, previous=None)
+            self.end_t_now[k] = min(record["end_t"], record["steps_per_coin"])
         else:
             counts = opts["num_coins"]
-            num_coins = int(counts[rng.integers(0, len(counts))]) if counts else 0  # == rng.choice(counts)
-            self.num_coins[k] = num_coins
-            self._ensure_coin_capacity(num_coins)
+            num_coins = int(counts[rng.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
+            self.num_coins[k] = self.coins_left[k] = num_coins
+            self.goal_without_exit[k] = not opts["use_exit"] and num_coins > 0
+            if num_coins > self.coin_x.shape[1]:
+                grow = ((0, 0), (0, num_coins - self.coin_x.shape[1]))
+                self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
+                self.coin_alive = np.pad(self.coin_alive, grow)
             self.coin_alive[k] = False
             for j in range(num_coins):
                 cx, cy = sample_position(mask, rng, ITEM_BLOCK)
                 cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
-                self.coin_x[k, j], self.coin_y[k, j] = _clamp_item(cx), _clamp_item(cy)
-                self.coin_alive[k, j] = True
+                self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
             if opts["use_exit"]:
                 ex, ey = sample_position(mask, rng, ITEM_BLOCK)
                 ex, ey = ex + int(rng.integers(2, 4)), ey + int(rng.integers(2, 4))
                 self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
+                if num_coins == 0:
+                    self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
+        self.next_hud[k] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
+        self.hud[k] = paint_hud_row(self.endless, *self._hud_flags(k), (0, 0), 0, 0)
         self._build_lit(k)
-        self._draw_reset_frame(k)
+        slot = np.array([k])
+        out = self.frames[k : k + 1]
+        self._blend_slots(slot, np.array([0]), NO_HOLES, out)  # no holes yet
+        self._finish_frames(slot, out)
 
-    def _apply_options(self, k: int, opts: dict[str, Any]) -> None:
-        endless = self.endless
-        self.max_steps[k] = opts["max_steps"]
-        self.agent_speed[k] = opts["agent_speed"]
-        self.agent_scale[k] = opts["agent_scale"]
-        self.agent_radius[k] = int(25 * opts["agent_scale"])
-        sprite = agent_planes(float(opts["agent_scale"]))[0]
-        self.agent_reach[k] = max(sprite.height, sprite.width) // 2 + 1  # how far the sprite reaches
-        self.max_health[k] = opts["agent_health"]
-        self.spot_damage[k] = opts["spot_damage"]
-        self.reward_inside[k] = opts["reward_inside_spotlight"]
-        self.reward_outside[k] = opts["reward_outside_spotlight"]
-        self.reward_death[k] = opts["reward_death"]
-        self.reward_coin[k] = opts["reward_coin"]
-        self.reward_exit[k] = 0.0 if endless else opts["reward_exit"]
-        if opts["black_background"]:
-            self.floor_kind[k] = FLOOR_BLACK
-        elif opts["hide_chessboard"]:
-            self.floor_kind[k] = FLOOR_WHITE
-        else:
-            self.floor_kind[k] = FLOOR_CHESS
-        self.red_feedback[k] = opts["visual_feedback"] and self.floor_kind[k] == FLOOR_CHESS
-        self.rings[k] = opts["black_background"]
-        duration = opts["light_dim_off_duration"]
-        self.dim_step[k] = int(255 / duration) if duration > 0 else 0
-        self.light_threshold[k] = opts["light_threshold"]
-        if endless:
-            self.spawn_interval[k] = opts["spawn_interval"]
-            self.steps_per_coin[k] = opts["steps_per_coin"]
-            self.coin_show_duration[k] = opts["coin_show_duration"]
-            self.use_exit[k] = False
-            show_action = opts["show_last_action"]
-        else:
-            # The reference reads the first entry of its interval list and pops the last: a constant interval.
-            self.spawn_interval[k] = int(opts["initial_spawn_interval"] + opts["spawn_interval_threshold"])
-            self.spawns_left[k] = opts["num_spawns"]
-            self.use_exit[k] = opts["use_exit"]
-            self.exit_scale[k] = opts["exit_scale"]
-            self.exit_reach[k] = 20 / 2 * opts["exit_scale"] + self.agent_radius[k]
-            show_action = opts["show_last_action"]
-        self.hud_flags[k] = 4 * endless + 2 * show_action + opts["show_last_positive_reward"]
-        self.agent_hidden[k] = not opts["agent_visible"]
-        self.coins_visible[k] = opts["coins_visible"]
-        self.coin_scale[k] = opts["coin_scale"]
-        self.coin_radius[k] = int(10 * opts["coin_scale"])
-        self.any_visible[k] = opts["agent_visible"] or opts["coins_visible"] or opts.get("exit_visible", False)
-        self.max_radius = max(self.max_radius, int(opts["spot_max_radius"]))
-        # draw orders, keyed by "coin drawn above the darkness" (it changes during an endless episode)
-        agent = ("agent", 3, opts["agent_visible"])
-        if endless:
-            self.orders[k] = {v: draw_order([("coins", 1, v), agent]) for v in (False, True)}
-        else:
-            entities = [("coins", 1, opts["coins_visible"]), ("exit", 2, opts["exit_visible"]), agent]
-            if not opts["use_exit"]:
-                entities.pop(1)  # no exit is drawn at all (the reference would draw a stale or missing one)
-            order = draw_order(entities)
-            self.orders[k] = {False: order, True: order}
+    def _hud_flags(self, k: int) -> tuple[bool, bool]:
+        flags = int(self.hud_flags27[k]) // 27
+        return bool(flags & 2), bool(flags & 1)
 
-    def _ensure_coin_capacity(self, count: int) -> None:
-        if count > self.coin_x.shape[1]:
-            grow = count - self.coin_x.shape[1]
-            self.coin_x = np.pad(self.coin_x, ((0, 0), (0, grow)))
-            self.coin_y = np.pad(self.coin_y, ((0, 0), (0, grow)))
-            self.coin_alive = np.pad(self.coin_alive, ((0, 0), (0, grow)))
-
-    def _spawn_spot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
-        """Append a spotlight to slot k's list: radius, speed, then the three angles (the reference's 5 draws)."""
-        radius = rng.integers(opts["spot_min_radius"], opts["spot_max_radius"] + 1)
-        speed = rng.uniform(opts["spot_min_speed"], opts["spot_max_speed"])
-        start = rng.integers(0, 360)
-        target = start + 180 + rng.integers(-45, 45)
-        offset = target + rng.integers(-135, 135)
-        orbit = SPOT_ORBIT + radius
-        j = int(self.spot_count[k])
-        if j == self.spot_capacity:
-            self._allocate_spots(2 * self.spot_capacity)
-        points = []
-        for angle in (start, target, offset):  # pygame's rotation, for the reference's exact floats
-            p = pygame.math.Vector2(CENTRE, CENTRE) + pygame.math.Vector2(orbit, 0).rotate(float(angle))
-            points.append(complex(p.x, p.y))
-        self.spot_radius[k, j] = radius
-        self.spot_speed[k, j] = speed
-        self.spot_tau[k, j] = 0.0
-        self.spot_done[k, j] = False
-        self.spot_drawn[k, j] = False
-        self.spot_start[k, j], self.spot_target[k, j], self.spot_offset[k, j] = points
-        self.spot_count[k] = j + 1
+    def _place_coin(self, k: int, j: int, x: int, y: int) -> None:
+        self.coin_x[k, j], self.coin_y[k, j] = x, y
+        self.coin_alive[k, j] = True
+        rows, cols, touch = _disc_pixels(x, y, int(self.coin_reach[k]))
+        self.item_map[k, rows, cols] |= touch.astype(np.uint16) << j
 
     def _spawn_endless_coin(self, k: int, rng: np.random.Generator, previous: tuple[int, int] | None) -> None:
         """A new coin: the sampler is cleared, the old coin's place blocked, then a draw (the reference's order)."""
@@ -607,29 +740,280 @@ class SearingSpotlightsCore(BatchedCore):
             block_position(mask, previous[0], previous[1], AGENT_BLOCK)
         cx, cy = sample_position(mask, rng, AGENT_BLOCK)
         cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
-        self.coin_x[k, 0], self.coin_y[k, 0] = _clamp_item(cx), _clamp_item(cy)
-        self.coin_alive[k, 0] = True
+        self.item_map[k] = 0
+        self._place_coin(k, 0, _clamp_item(cx), _clamp_item(cy))
 
-    # ------------------------------------------------------------------------------------------- pictures
+    # ---------------------------------------------------------------------------------------------- step
+    def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        actions = actions.reshape(-1, 2)
+        act = actions[:, 0] * 3 + actions[:, 1]
+        n = act.shape[0]
+        slots = self.all_slots if isinstance(idx, slice) else idx
+        # 1. move, clamped into the walkable area below the HUD
+        pos = self.pos[idx] + self.vel[slots, act]
+        np.maximum(np.minimum(pos, self.pos_high[idx], out=pos), self.pos_low[idx], out=pos)
+        self.pos[idx] = pos
+        turn = ACTION_HEADING[act]
+        self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
+        # 2. the HUD shows the previous action and whether the previous reward was positive (decided in step 8)
+        hud_code = np.array(self.next_hud[idx])  # a copy: next_hud is updated below
+        # 3. the light dims until the threshold is passed
+        alpha = self.alpha[idx]
+        alpha = np.minimum(alpha + self.dim_step[idx] * (alpha <= self.light_threshold[idx]), 255)
+        self.alpha[idx] = alpha
+        # 4. spotlights: maybe spawn one, then draw, move and hit-test every spotlight in list order
+        t = self.t[idx] + 1
+        self.t[idx] = t
+        spawn = t == self.next_spawn[idx]
+        if spawn.any():
+            self._spawn_spots(slots[spawn])
+        hit, spots = self._spotlight_pass(idx, pos)
+        self.hit[idx] = hit
+        dead = None
+        if hit.any():
+            rewards = np.where(hit, self.reward_inside[idx], self.reward_outside[idx])
+            health = self.health[idx] - self.spot_damage[idx] * hit
+            self.health[idx] = health
+            self.hud_red[idx] = np.trunc(SCREEN // 2 * (1 - health / self.max_health[idx]))
+            dead = health <= 0
+            rewards += self.reward_death[idx] * dead
+        else:
+            rewards = np.array(self.reward_outside[idx])
+        # 5.-7. coins and exit (a lookup of what touches the agent's position), termination
+        touching = self.item_map[slots, pos[:, 1], pos[:, 0]]
+        terminated = t == self.end_t_now[idx]
+        if touching.any():
+            self._item_events(slots, np.flatnonzero(touching), touching, rewards, terminated, dead)
+        if dead is not None:
+            terminated |= dead
+        # 8. the HUD of the next step shows this action and whether this reward was positive
+        self.next_hud[idx] = self.hud_flags27[idx] + 3 * act + 1 + (rewards > 0)
+        self._draw(idx, slots, n, hit, hud_code, spots)
+        return rewards, terminated
+
+    def _spawn_spots(self, slots: np.ndarray) -> None:
+        for k in slots:
+            k = int(k)
+            self._append_spot(k)
+            self.next_spawn[k] += self.spawn_interval[k]
+            if not self.endless:
+                self.spawns_left[k] -= 1
+                if self.spawns_left[k] == 0:
+                    self.next_spawn[k] = NEVER
+
+    def _item_events(
+        self,
+        slots: np.ndarray,
+        local: np.ndarray,
+        touching: np.ndarray,
+        rewards: np.ndarray,
+        terminated: np.ndarray,
+        dead: np.ndarray | None,
+    ) -> None:
+        """Coins, exit and goal for the slots whose agent touches a coin or the exit (in place)."""
+        for i in local:
+            k = int(slots[i])
+            bits = int(touching[i])
+            x, y = int(self.x[k]), int(self.y[k])
+            if self.endless:
+                # The coin clock restarts: it reads 0 after this pickup and 1 after this step, as if it had been
+                # set to 0 one step earlier (at reset it is 0 at step 0).
+                rewards[i] += self.reward_coin[k]
+                self.coins_collected[k] += 1
+                zero_t = int(self.t[k]) - 1
+                self.coin_shown_until[k] = zero_t + int(self.coin_show_duration[k])
+                per_coin = int(self.steps_per_coin[k])
+                self.end_t_now[k] = min(int(self.end_t[k]), NEVER if per_coin == NEVER else zero_t + per_coin)
+                terminated[i] = self.t[k] == self.end_t_now[k]
+                previous = (int(self.coin_x[k, 0]), int(self.coin_y[k, 0]))
+                self._spawn_endless_coin(k, self.rngs[k], previous)
+                self._build_lit(k)
+                continue
+            coin_reward = 0.0
+            removed_before = taken = False
+            for j in range(self.coin_alive.shape[1]):  # the reference's list iteration with removal
+                if not self.coin_alive[k, j]:
+                    continue
+                got = bool(bits >> j & 1) and not removed_before
+                if got:
+                    coin_reward += self.reward_coin[k]
+                    self.coin_alive[k, j] = False
+                    self.coins_collected[k] += 1
+                    self.coins_left[k] -= 1
+                    self.item_map[k] &= np.uint16(~(1 << j) & 0xFFFF)
+                    taken = True
+                removed_before = got
+            rewards[i] += coin_reward
+            coins_done = self.coins_left[k] == 0
+            reached = False
+            if self.use_exit[k] and coins_done:
+                if not self.exit_open[k]:
+                    self.exit_open[k] = True
+                    taken = True
+                    self.item_map[k] &= np.uint16(~OPEN_EXIT_BIT & 0xFFFF)
+                    rows, cols, touch = _disc_pixels(int(self.exit_x[k]), int(self.exit_y[k]), self.exit_reach[k])
+                    self.item_map[k, rows, cols] |= touch.astype(np.uint16) * np.uint16(EXIT_BIT)
+                reached = math.sqrt((self.exit_x[k] - x) ** 2 + (self.exit_y[k] - y) ** 2) <= self.exit_reach[k]
+                if reached:
+                    rewards[i] += self.reward_exit[k]
+            if taken:
+                self._build_lit(k)
+            goal = coins_done and (reached or self.goal_without_exit[k])
+            if goal:
+                self.success[k] = not (dead is not None and dead[i])
+                terminated[i] = True
+
+    def _spotlight_pass(self, idx: Index, pos: np.ndarray) -> tuple[np.ndarray, tuple]:
+        """Draw (record), move and hit-test the spotlights; finished ones are removed when next visited.
+
+        Returns the per-slot hit flags and what the drawing needs: the centres, table offsets, the drawn
+        spotlights and those near the agent.
+        """
+        spots = self.spots[idx]
+        tau = spots["tau"]
+        rest = 1.0 - tau
+        centre = spots["start"] * rest  # pygame's lerp a * (1 - t) + b * t, twice: a curve from S to O
+        centre += (spots["target"] * rest + spots["offset"] * tau) * tau
+        delta = centre - pos.astype(np.float64).view(np.complex128)
+        dx, dy = delta.real, delta.imag
+        distance = np.sqrt(dx * dx + dy * dy)
+        hits = distance <= spots["reach"]
+        near = distance <= spots["near"]
+        base = spots["base"]
+        done = spots["done"]
+        drawn = spots["listed"]
+        removed = None
+        if done.any():
+            # The reference removes finished spotlights while iterating over its list, so the spotlight right
+            # after a removed one is not visited in that step: not drawn, not moved, unable to hit.
+            visited = np.ones_like(drawn)
+            for j in range(1, drawn.shape[1]):
+                visited[:, j] = ~(visited[:, j - 1] & done[:, j - 1])
+            drawn = visited & drawn & ~done
+            removed = visited & done
+            hits &= drawn
+            near &= drawn
+            tau = np.where(drawn, tau + spots["speed"], tau)
+        else:
+            tau = tau + spots["speed"]
+        columns = {"tau": np.minimum(tau, 1.0), "done": tau >= 1.0, "centre": centre, "drawn": drawn}
+        for name, value in columns.items():
+            if isinstance(idx, slice):
+                self.spots[name] = value
+            else:
+                self.spots[name][idx] = value
+        if removed is not None and removed.any():
+            base = base.copy()  # a view of the arrays that the removal compacts
+            self._remove_spots(idx, removed)
+        return hits.any(axis=1), (centre, base, drawn, near)
+
+    def _remove_spots(self, idx: Index, removed: np.ndarray) -> None:
+        """Compact the spotlight lists (keeping their order); freed positions get the unused values."""
+        spots = self.spots[idx]
+        keep = spots["listed"] & ~removed
+        order = np.argsort(~keep, axis=1, kind="stable")
+        compacted = np.take_along_axis(spots, order, axis=1)
+        count = keep.sum(axis=1)
+        compacted[np.arange(compacted.shape[1])[None, :] >= count[:, None]] = self.unused_spot
+        self.spots[idx] = compacted
+        self.spot_count[idx] = count
+
+    # ---------------------------------------------------------------------------------------------- draw
+    def _draw(self, idx: Index, slots: np.ndarray, n: int, hit: np.ndarray, hud_code: np.ndarray, spots) -> None:
+        """Compose the frames of the stepped slots (see the module docstring)."""
+        centre, base, drawn, near = spots
+        holes = self._hole_masks(n, centre, base, drawn)
+        out = self.frames if isinstance(idx, slice) else np.empty((n, SCREEN, ROW_BYTES), np.uint8)
+        np.bitwise_and(holes, self.lit[0][idx], out=out)
+        self.hud[idx, ROW_BYTES // 2 :] = hud_tables()[1][hud_code]
+        if hit.any():
+            for i in np.flatnonzero(hit & self.red_feedback[idx]):
+                out[i] = holes[i] & self.lit[1, slots[i]]
+            self._paint_red(idx, slots, hud_code)
+        # the hidden agent shows where it overlaps a hole
+        fix = np.flatnonzero(near.any(axis=1))
+        if fix.size:
+            self._paste_agents(out, fix, slots[fix], where=holes)
+        blend = self.alpha[idx] < self.blend_below[idx]
+        if blend.any():
+            local = np.flatnonzero(blend)
+            self._blend_slots(slots[local], local, holes, out)
+        self._finish_frames(idx, out)
+        if not isinstance(idx, slice):
+            self.frames[idx] = out
+
+    def _paint_red(self, idx: Index, slots: np.ndarray, hud_code: np.ndarray) -> None:
+        """The HUD's health bar after a hit: red from the left, as wide as the lost share of the health."""
+        left = hud_tables()[0]
+        red = self.hud_red[idx]
+        self.hud[idx, : ROW_BYTES // 2] = left[np.minimum(red, SCREEN // 2)]
+        for i in np.flatnonzero(red > SCREEN // 2):  # health below 0: the red part reaches into the right half
+            flags, code = divmod(int(hud_code[i]), 27)
+            action, reward_state = (code // 9, code // 3 % 3), code % 3
+            self.hud[slots[i]] = paint_hud_row(
+                bool(flags & 4), bool(flags & 2), bool(flags & 1), action, reward_state, int(red[i])
+            )
+
+    def _hole_masks(self, n: int, centre: np.ndarray, base: np.ndarray, drawn: np.ndarray) -> np.ndarray:
+        """(n, 84, 252) 0/255 masks of this step's spotlight holes, gathered row by row from the span table."""
+        tables = self.tables
+        if n > 4:  # many slots: only the drawn spotlights
+            local, j = np.nonzero(drawn)
+            centre, base = centre[local, j], base[local, j]
+            row_base = local[:, None] * SCREEN
+        else:
+            row_base = self.all_slots[:n, None, None] * SCREEN
+        codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (..., disc rows)
+        rows = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
+        codes *= rows != 0
+        if n <= 4:
+            codes *= drawn[:, :, None]
+        keys = rows * (codes != 0)  # empty spans go to row 0 (under the HUD), where they cannot collide
+        keys += row_base
+        index = self.span_index[: n * SCREEN]
+        index.fill(0)
+        index[keys] = codes
+        table = span_rows()
+        holes = self.holes[: n * SCREEN]
+        np.take(table, index, axis=0, out=holes, mode="clip")
+        # rows crossed by several spotlights: OR the other spans in, one layer at a time
+        pending = index[keys] != codes
+        if pending.any():
+            keys, codes = keys[pending], codes[pending]
+            hole_rows, table_rows = holes.view(ROW)[:, 0], table.view(ROW)[:, 0]
+            while keys.size:
+                index[keys] = codes
+                first = index[keys] == codes
+                target = keys[first]
+                merged = hole_rows[target].view(np.uint8) | table_rows[codes[first]].view(np.uint8)
+                hole_rows[target] = merged.view(ROW)
+                keys, codes = keys[~first], codes[~first]
+        return holes.reshape(n, SCREEN, ROW_BYTES)
+
+    def _paste_agents(self, frames: np.ndarray, local: np.ndarray, slots: np.ndarray, where=None) -> None:
+        """Paste the agents of ``slots`` into ``frames[local]`` (masked by ``where``, e.g. the holes)."""
+        sprite = np.where(self.t[slots] > 0, self.heading[slots], 0)  # the reset frame shows it facing up
+        scales = self.agent_scale[slots]
+        for scale in np.unique(scales):
+            same = scales == scale
+            pixels = agent_pixels(float(scale))
+            pixels.paste(frames, local[same], self.x[slots[same]], self.y[slots[same]], sprite[same], where)
+
     def _build_lit(self, k: int) -> None:
-        """Slot k's lit pictures (blue and red floor) with its coins and exit, drawn in the reference's order."""
-        coin = coin_planes(float(self.coin_scale[k]))
-        alive = np.flatnonzero(self.coin_alive[k])
-        for hit in (False, True):
-            rows = self.lit[int(hit), k]
-            rows[:] = floor_rows(int(self.floor_kind[k]), hit and bool(self.red_feedback[k]))
-            for j in alive:
-                coin.paste(rows, self.coin_x[k, j], self.coin_y[k, j])
-            if self.use_exit[k]:
-                planes = exit_planes(float(self.exit_scale[k]), bool(self.exit_open[k]))
-                planes.paste(rows, self.exit_x[k], self.exit_y[k])
-
-    def _agent_planes(self, k: int) -> Planes:
-        return agent_planes(float(self.agent_scale[k]))[int(self.sprite_heading[k]) // 45]
+        """Slot k's lit pictures (blue and red floor) with its coins and exit, in the reference's order."""
+        rows = self.lit[:, k]
+        kind = int(self.floor_kind[k])
+        rows[0] = floor_rows(kind, False)
+        rows[1] = floor_rows(kind, bool(self.red_feedback[k]))
+        if self.coins_left[k]:
+            self._paste_entity(rows, k, "coins")
+        if self.use_exit[k]:
+            self._paste_entity(rows, k, "exit")
 
     def _paste_entity(self, rows: np.ndarray, k: int, name: str) -> None:
+        """Paste one entity of slot k into ``rows`` ((84, 252), or a stack of them)."""
         if name == "agent":
-            self._agent_planes(k).paste(rows, self.x[k], self.y[k])
+            self._paste_agents(rows.reshape(-1, SCREEN, ROW_BYTES), np.zeros(1, np.intp), np.array([k]))
         elif name == "coins":
             coin = coin_planes(float(self.coin_scale[k]))
             for j in np.flatnonzero(self.coin_alive[k]):
@@ -639,325 +1023,64 @@ class SearingSpotlightsCore(BatchedCore):
 
     def _coin_above(self, k: int) -> bool:
         """Whether slot k's coin is drawn above the darkness now (endless: also while it is new)."""
-        return bool(self.coins_visible[k]) or (self.endless and self.coin_t[k] < self.coin_show_duration[k])
-
-    def _hud_rows(self, idx: Index) -> np.ndarray:
-        """The top-bar row (252 bytes) of each selected slot."""
-        left, right = hud_tables()
-        red = np.trunc(SCREEN // 2 * (1 - self.health[idx] / self.max_health[idx])).astype(np.int64)
-        action, reward_state = self.hud_action[idx], self.hud_reward[idx]
-        code = self.hud_flags[idx] * 27 + action[:, 0] * 9 + action[:, 1] * 3 + reward_state
-        rows = np.concatenate([left[np.clip(red, 0, SCREEN // 2)], right[code]], axis=1)
-        for i in np.flatnonzero(red > SCREEN // 2):  # health below 0: the red part reaches into the right half
-            k = int(self.slots(idx)[i])
-            flags = int(self.hud_flags[k])
-            rows[i] = paint_hud_row(
-                bool(flags & 4), bool(flags & 2), bool(flags & 1), tuple(action[i]), int(reward_state[i]), int(red[i])
-            )
-        return rows
+        return bool(self.coins_visible[k]) or (self.endless and self.t[k] < self.coin_shown_until[k])
 
     def _finish_frames(self, idx: Index, out: np.ndarray) -> None:
         """Entities above the darkness, the HUD, then the entities that the reference draws after the HUD."""
-        slots = self.slots(idx)
         special = self.any_visible[idx]
         if self.endless:
-            special = special | (self.coin_t[idx] < self.coin_show_duration[idx])
+            special = special | (self.t[idx] < self.coin_shown_until[idx])
         special = np.flatnonzero(special)
+        slots = self.all_slots[idx]
         for i in special:
             k = int(slots[i])
             for name in self.orders[k][self._coin_above(k)][0]:
                 self._paste_entity(out[i], k, name)
-        out[:, :HUD_ROWS, :] = self._hud_rows(idx)[:, None, :]
+        out[:, :HUD_ROWS] = self.hud[idx][:, None]
         for i in special:
             k = int(slots[i])
             for name in self.orders[k][self._coin_above(k)][1]:
                 self._paste_entity(out[i], k, name)
 
     def _blend_slots(self, slots: np.ndarray, local: np.ndarray, holes: np.ndarray, out: np.ndarray) -> None:
-        """Frames with a partly transparent darkness or with spotlight rings: lit inside holes, blended outside.
+        """Frames with a partly transparent darkness or with spotlight rings: lit in the holes, blended elsewhere.
 
-        ``slots`` are slot numbers, ``local`` their rows in ``holes`` (n, 84, 252 of 0/255) and ``out``.
+        ``slots`` are slot numbers, ``local`` their frames in ``holes`` ((n, 84, 252) of 0/255) and ``out``.
         """
         lit = self.lit[(self.hit[slots] & self.red_feedback[slots]).astype(np.intp), slots]
-        for i, k in enumerate(slots):
-            if self.agent_hidden[k]:
-                self._agent_planes(int(k)).paste(lit[i], self.x[k], self.y[k])
-        alpha = np.minimum(self.alpha[slots], 255)[:, None, None]
-        dark = darken(lit, alpha)
-        mask = holes[local]
-        blended = dark ^ ((dark ^ lit) & mask)
-        for i, k in enumerate(slots):
-            if self.rings[k]:
-                self._draw_rings(int(k), lit[i], blended[i])
-        out[local] = blended
+        hidden = np.flatnonzero(self.agent_hidden[slots])
+        if hidden.size:
+            self._paste_agents(lit, hidden, slots[hidden])
+        alpha = self.alpha[slots]
+        if alpha.any():
+            dark = darken(lit, alpha[:, None, None])
+            blended = dark ^ ((dark ^ lit) & holes[local])
+            for i, k in enumerate(slots):
+                if self.rings[k]:
+                    self._draw_rings(int(k), blended[i], lit[i])
+            lit = blended
+        out[local] = lit
 
-    def _draw_rings(self, k: int, lit: np.ndarray, frame: np.ndarray) -> None:
-        """Spotlights drawn with rings: holes and white outlines are painted in list order (later ones on top)."""
-        state = np.zeros((SCREEN, SCREEN), np.int8)  # 0 darkness, 1 hole, 2 white ring
-        for j in np.flatnonzero(self.spot_drawn[k, : self.spot_count[k]]):
-            radius, cx, cy = int(self.spot_radius[k, j]), int(self.spot_cx[k, j]), int(self.spot_cy[k, j])
+    def _draw_rings(self, k: int, frame: np.ndarray, under: np.ndarray) -> None:
+        """White 1-px outlines (black_background), blended over ``under`` (what lies beneath the darkness).
+
+        Holes and outlines are painted in list order, so a later hole can cut into an earlier outline.
+        """
+        state = np.zeros((SCREEN, SCREEN), np.int8)  # 0 darkness, 1 hole, 2 outline
+        spots = self.spots[k]
+        for j in np.flatnonzero(spots["drawn"]):
+            centre, radius = spots["centre"][j], int(spots["radius"][j])
             disc, offset = disc_mask(radius)
             ring = ring_mask(radius)
-            top, left = cy + offset, cx + offset
+            top, left = int(centre.imag) + offset, int(centre.real) + offset
             r0, c0 = max(top, 0), max(left, 0)
             r1, c1 = min(top + disc.shape[0], SCREEN), min(left + disc.shape[1], SCREEN)
-            if r0 >= r1 or c0 >= c1:
-                continue
-            window = state[r0:r1, c0:c1]
-            window[disc[r0 - top : r1 - top, c0 - left : c1 - left]] = 1
-            window[ring[r0 - top : r1 - top, c0 - left : c1 - left]] = 2
-        white = np.repeat(state == 2, 3, axis=1)
-        frame[white] = lighten(lit, int(min(self.alpha[k], 255)))[white]
-
-    def _draw_reset_frame(self, k: int) -> None:
-        """The reset picture: no holes yet (alpha 0 shows everything lit; alpha > 0 darkens it all)."""
-        slots = np.array([k])
-        self.holes[:SCREEN] = 0
-        out = self.frames[k : k + 1]
-        self._blend_slots(slots, np.array([0]), self.holes[:SCREEN].reshape(1, SCREEN, ROW_BYTES), out)
-        self._finish_frames(slots, out)
-
-    # ---------------------------------------------------------------------------------------------- step
-    def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        actions = actions.reshape(-1, 2).astype(np.int64)
-        n = actions.shape[0]
-        slots = self.slots(idx)
-        # 1. move (clamped into the walkable area below the HUD)
-        radius = self.agent_radius[idx]
-        vx, vy = continuous_velocity(actions, self.agent_speed[idx])
-        x = clamp_centre(self.x[idx] + vx.astype(np.int64), radius, SCREEN - radius)
-        y = clamp_centre(self.y[idx] + vy.astype(np.int64), HUD_ROWS + radius, SCREEN - radius)
-        self.x[idx], self.y[idx] = x, y
-        heading = continuous_heading(actions, self.heading[idx])
-        self.heading[idx] = heading
-        self.sprite_heading[idx] = heading
-        # 2. the HUD shows the previous action
-        self.hud_action[idx] = self.last_action[idx]
-        self.last_action[idx] = actions
-        # 3. dimming
-        alpha = self.alpha[idx]
-        dim = alpha <= self.light_threshold[idx]
-        step = self.dim_step[idx]
-        stepped = np.where(step > 0, np.minimum(alpha + step, 255), self.light_threshold[idx])
-        alpha = np.where(dim, stepped, alpha)
-        self.alpha[idx] = alpha
-        # 4. spotlights: maybe spawn, then process the list
-        timer = self.spawn_timer[idx] + 1
-        spawn = timer >= self.spawn_interval[idx]
-        if not self.endless:
-            spawn &= self.spawns_left[idx] > 0
-        for i in np.flatnonzero(spawn):
-            k = int(slots[i])
-            self._spawn_spot(k, self.rngs[k], self.slot_options[k])
-            self.spawns_left[k] -= 1
-        self.spawn_timer[idx] = np.where(spawn, 0, timer)
-        hit = self._process_spotlights(idx, slots, x, y, radius)
-        health = self.health[idx] - np.where(hit, self.spot_damage[idx], 0.0)
-        self.health[idx] = health
-        self.hit[idx] = hit
-        dead = health <= 0
-        rewards = np.where(hit, self.reward_inside[idx], self.reward_outside[idx])
-        rewards = rewards + np.where(dead, self.reward_death[idx], 0.0)
-        # 5.-7. coins, exit, termination
-        t = self.t[idx] + 1
-        self.t[idx] = t
-        if self.endless:
-            rewards = rewards + self._endless_coin_phase(idx, slots, x, y, radius)
-            coin_t = self.coin_t[idx] + 1
-            self.coin_t[idx] = coin_t
-            terminated = dead | (coin_t == self.steps_per_coin[idx])
-        else:
-            coin_rewards, coins_done = self._coin_phase(idx, slots, x, y, radius)
-            rewards = rewards + coin_rewards
-            exit_rewards, reached = self._exit_phase(idx, slots, x, y, coins_done)
-            rewards = rewards + exit_rewards
-            goal = coins_done & np.where(self.use_exit[idx], reached, self.num_coins[idx] > 0)
-            self.success[idx] = ~dead & goal
-            terminated = dead | goal
-        terminated = terminated | (t == self.max_steps[idx])
-        # 8. the HUD shows whether the previous reward was positive
-        self.hud_reward[idx] = self.last_reward[idx]
-        self.last_reward[idx] = 1 + (rewards > 0)
-        self._draw(idx, slots, n)
-        return rewards, terminated
-
-    def _process_spotlights(
-        self, idx: Index, slots: np.ndarray, x: np.ndarray, y: np.ndarray, agent_radius: np.ndarray
-    ) -> np.ndarray:
-        """Draw (record), move and hit-test every spotlight; finished ones are removed (with the skip quirk)."""
-        count = self.spot_count[idx]
-        listed = self.spot_slots[None, :] < count[:, None]
-        done = self.spot_done[idx] & listed
-        if done.any():
-            # The reference removes finished spotlights while iterating its list, so the one right after a
-            # removed spotlight is not visited in that step (not drawn, not moved, cannot hit).
-            visited = np.ones_like(listed)
-            for j in range(1, int(count.max())):
-                visited[:, j] = ~(visited[:, j - 1] & done[:, j - 1])
-            removed = visited & done
-            processed = visited & listed & ~done
-        else:
-            removed = None
-            processed = listed
-        tau = self.spot_tau[idx]
-        rest = 1.0 - tau
-        curve = self.spot_target[idx] * rest + self.spot_offset[idx] * tau
-        centre = self.spot_start[idx] * rest + curve * tau  # pygame's lerp: a * (1 - t) + b * t
-        radius = self.spot_radius[idx]
-        delta = centre - (x + 1j * y)[:, None]
-        distance = np.sqrt(delta.real * delta.real + delta.imag * delta.imag)
-        hits = processed & (distance <= (radius + agent_radius[:, None]))
-        tau = np.where(processed, tau + self.spot_speed[idx], tau)
-        finished = tau >= 1.0
-        self.spot_tau[idx] = np.where(finished, 1.0, tau)
-        self.spot_done[idx] = done | (processed & finished)
-        self.spot_cx[idx] = np.trunc(centre.real).astype(np.int64)
-        self.spot_cy[idx] = np.trunc(centre.imag).astype(np.int64)
-        self.spot_drawn[idx] = processed
-        if removed is not None and removed.any():
-            self._remove_spots(idx, listed & ~removed)
-        return hits.any(axis=1)
-
-    def _remove_spots(self, idx: Index, keep: np.ndarray) -> None:
-        """Compact the spotlight lists, keeping the order of the remaining ones."""
-        order = np.argsort(~keep, axis=1, kind="stable")
-        for name in (
-            "spot_radius",
-            "spot_speed",
-            "spot_tau",
-            "spot_done",
-            "spot_start",
-            "spot_target",
-            "spot_offset",
-            "spot_cx",
-            "spot_cy",
-            "spot_drawn",
-        ):
-            array = getattr(self, name)
-            array[idx] = np.take_along_axis(array[idx], order, axis=1)
-        kept = keep.sum(axis=1)
-        self.spot_count[idx] = kept
-        stale = self.spot_slots[None, :] >= kept[:, None]
-        self.spot_done[idx] = self.spot_done[idx] & ~stale
-        self.spot_drawn[idx] = self.spot_drawn[idx] & ~stale
-
-    def _coin_phase(
-        self, idx: Index, slots: np.ndarray, x: np.ndarray, y: np.ndarray, agent_radius: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Collect the coins the agent touches (the coin after a collected one is tested a step later)."""
-        alive = self.coin_alive[idx]
-        reach = (self.coin_radius[idx] + agent_radius)[:, None]
-        dx, dy = self.coin_x[idx] - x[:, None], self.coin_y[idx] - y[:, None]
-        inside = alive & (np.sqrt(dx * dx + dy * dy) <= reach)
-        rewards = np.zeros(len(slots))
-        if inside.any():
-            removed_before = np.zeros(len(slots), bool)
-            taken = np.zeros_like(alive)
-            coin_reward = self.reward_coin[idx]
-            for j in range(alive.shape[1]):
-                got = inside[:, j] & ~removed_before
-                taken[:, j] = got
-                rewards = np.where(got, rewards + coin_reward, rewards)
-                removed_before = np.where(alive[:, j], got, removed_before)
-            alive = alive & ~taken
-            self.coin_alive[idx] = alive
-            self.coins_collected[idx] = self.coins_collected[idx] + taken.sum(axis=1)
-            for i in np.flatnonzero(taken.any(axis=1)):
-                self._build_lit(int(slots[i]))
-        coins_done = (self.num_coins[idx] == 0) | ~alive.any(axis=1)
-        return rewards, coins_done
-
-    def _exit_phase(
-        self, idx: Index, slots: np.ndarray, x: np.ndarray, y: np.ndarray, coins_done: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Once the coins are done the exit opens; reaching it pays ``reward_exit``."""
-        active = self.use_exit[idx] & coins_done
-        opening = active & ~self.exit_open[idx]
-        if opening.any():
-            for i in np.flatnonzero(opening):
-                k = int(slots[i])
-                self.exit_open[k] = True
-                self._build_lit(k)
-        dx, dy = self.exit_x[idx] - x, self.exit_y[idx] - y
-        reached = active & (np.sqrt(dx * dx + dy * dy) <= self.exit_reach[idx])
-        return np.where(reached, self.reward_exit[idx], 0.0), reached
-
-    def _endless_coin_phase(
-        self, idx: Index, slots: np.ndarray, x: np.ndarray, y: np.ndarray, agent_radius: np.ndarray
-    ) -> np.ndarray:
-        """The one coin: touching it pays ``reward_coin`` and a new coin spawns at once."""
-        dx, dy = self.coin_x[idx, 0] - x, self.coin_y[idx, 0] - y
-        inside = np.sqrt(dx * dx + dy * dy) <= self.coin_radius[idx] + agent_radius
-        if inside.any():
-            for i in np.flatnonzero(inside):
-                k = int(slots[i])
-                self.coins_collected[k] += 1
-                self.coin_t[k] = 0
-                previous = (int(self.coin_x[k, 0]), int(self.coin_y[k, 0]))
-                self._spawn_endless_coin(k, self.rngs[k], previous)
-                self._build_lit(k)
-        return np.where(inside, self.reward_coin[idx], 0.0)
-
-    # ---------------------------------------------------------------------------------------------- draw
-    def _draw(self, idx: Index, slots: np.ndarray, n: int) -> None:
-        """Compose the frames of the stepped slots (see the module docstring)."""
-        holes = self._hole_masks(idx, n)
-        out = self.frames[idx] if isinstance(idx, slice) else np.empty((n, SCREEN, ROW_BYTES), np.uint8)
-        blend = (self.alpha[idx] < 255) | self.rings[idx]
-        hit_floor = self.hit[idx] & self.red_feedback[idx]
-        np.bitwise_and(holes, self.lit[0][idx], out=out)
-        red = np.flatnonzero(hit_floor & ~blend)
-        if red.size:
-            out[red] = holes[red] & self.lit[1][slots[red]]
-        # the hidden agent shows where it overlaps a hole
-        near = self.agent_hidden[idx] & ~blend
-        if near.any():
-            reach = self.spot_radius[idx] + self.agent_reach[idx][:, None]
-            close = (
-                self.spot_drawn[idx]
-                & (np.abs(self.spot_cx[idx] - self.x[idx][:, None]) <= reach)
-                & (np.abs(self.spot_cy[idx] - self.y[idx][:, None]) <= reach)
-            )
-            for i in np.flatnonzero(near & close.any(axis=1)):
-                k = int(slots[i])
-                self._agent_planes(k).paste(out[i], self.x[k], self.y[k], where=holes[i])
-        if blend.any():
-            local = np.flatnonzero(blend)
-            self._blend_slots(slots[local], local, holes, out)
-        self._finish_frames(idx, out)
-        if not isinstance(idx, slice):
-            self.frames[idx] = out
-
-    def _hole_masks(self, idx: Index, n: int) -> np.ndarray:
-        """(n, 84, 252) 0/255 masks of the spotlight holes drawn in this step (rows 0-3 are left empty)."""
-        codes_table, row_offset, bound = disc_span_tables(self.max_radius)
-        drawn = self.spot_drawn[idx]
-        cx, cy, radius = self.spot_cx[idx], self.spot_cy[idx], self.spot_radius[idx]
-        drawn = drawn & (cx + radius > 0) & (cx - radius < SCREEN) & (cy + radius > HUD_ROWS) & (cy - radius < SCREEN)
-        local, j = np.nonzero(drawn)
-        radius = radius[local, j]
-        codes = codes_table[radius, np.clip(cx[local, j], -bound, SCREEN + bound - 1) + bound]
-        rows = cy[local, j][:, None] + row_offset[radius]
-        valid = (rows >= HUD_ROWS) & (rows < SCREEN)
-        dump = n * SCREEN
-        keys = np.where(valid, local[:, None] * SCREEN + rows, dump).ravel()
-        codes = (codes * valid).ravel()
-        index = self.span_index[: dump + 1]
-        index[:] = 0
-        index[keys] = codes
-        table = span_rows()
-        holes = self.holes[:dump]
-        np.take(table, index[:dump], axis=0, out=holes, mode="clip")
-        # rows crossed by several spotlights: OR the other spans in, one layer at a time
-        pending = index[keys] != codes
-        keys, codes = keys[pending], codes[pending]
-        while keys.size:
-            index[keys] = codes
-            first = index[keys] == codes
-            k1, c1 = keys[first], codes[first]
-            holes[k1] = holes[k1] | table[c1]
-            keys, codes = keys[~first], codes[~first]
-        return holes.reshape(n, SCREEN, ROW_BYTES)
+            if r0 < r1 and c0 < c1:
+                window = state[r0:r1, c0:c1]
+                window[disc[r0 - top : r1 - top, c0 - left : c1 - left]] = 1
+                window[ring[r0 - top : r1 - top, c0 - left : c1 - left]] = 2
+        outline = np.repeat(state == 2, 3, axis=1)
+        frame[outline] = lighten(under, int(self.alpha[k]))[outline]
 
     # ------------------------------------------------------------------------------------------ faces
     def _observation(self, idx: Index) -> np.ndarray:
@@ -969,7 +1092,7 @@ class SearingSpotlightsCore(BatchedCore):
             info["coins_collected"] = int(self.coins_collected[k])
         else:
             num = int(self.num_coins[k])
-            info["coins_collected"] = self.coins_collected[k] / num if num else float("nan")
+            info["coins_collected"] = float(self.coins_collected[k] / num) if num else float("nan")
             info["success"] = int(self.success[k])
         return info
 
@@ -980,28 +1103,23 @@ class SearingSpotlightsCore(BatchedCore):
         return {"ground_truth": position / SCREEN}
 
     def _debug_frame(self, k: int) -> np.ndarray:
-        """Floor, darkness with the last step's holes, then exit, coins, agent and HUD all above it."""
-        slots = np.array([k])
+        """Floor, the darkness with the last step's holes, then exit, coins, agent and HUD above it."""
         floor = floor_rows(int(self.floor_kind[k]), bool(self.hit[k] and self.red_feedback[k]))
-        rows = np.array(floor)
-        alpha = np.array(min(int(self.alpha[k]), 255))
-        dark = darken(rows, alpha)
-        holes = np.zeros((SCREEN, ROW_BYTES), np.uint8)
-        for j in np.flatnonzero(self.spot_drawn[k, : self.spot_count[k]]):
-            disc, offset = disc_mask(int(self.spot_radius[k, j]))
-            pixels = np.zeros((SCREEN, SCREEN), bool)
-            top, left = int(self.spot_cy[k, j]) + offset, int(self.spot_cx[k, j]) + offset
-            r0, c0 = max(top, 0), max(left, 0)
-            r1, c1 = min(top + disc.shape[0], SCREEN), min(left + disc.shape[1], SCREEN)
-            if r0 < r1 and c0 < c1:
-                pixels[r0:r1, c0:c1] = disc[r0 - top : r1 - top, c0 - left : c1 - left]
-                holes |= np.repeat(pixels, 3, axis=1).astype(np.uint8) * 255
-        frame = dark ^ ((dark ^ rows) & holes)
+        margin = 64  # room for spotlights partly or wholly off-screen
+        pixels = np.zeros((SCREEN + 2 * margin, SCREEN + 2 * margin), bool)
+        spots = self.spots[k]
+        for j in np.flatnonzero(spots["drawn"]):
+            centre = spots["centre"][j]
+            disc, offset = disc_mask(int(spots["radius"][j]))
+            top, left = int(centre.imag) + offset + margin, int(centre.real) + offset + margin
+            pixels[top : top + disc.shape[0], left : left + disc.shape[1]] |= disc
+        holes = np.repeat(pixels[margin:-margin, margin:-margin], 3, axis=1).astype(np.uint8) * 255
+        dark = darken(floor, np.array(self.alpha[k]))
+        frame = dark ^ ((dark ^ floor) & holes)
         if self.rings[k]:
-            self._draw_rings(k, rows, frame)
-        names = ("coins", "agent") if self.endless else ("exit", "coins", "agent")
-        for name in names:
+            self._draw_rings(k, frame, floor)
+        for name in ("coins", "agent") if self.endless else ("exit", "coins", "agent"):
             if name != "exit" or self.use_exit[k]:
                 self._paste_entity(frame, k, name)
-        frame[:HUD_ROWS] = self._hud_rows(slots)[0]
+        frame[:HUD_ROWS] = self.hud[k]
         return frame.reshape(SCREEN, SCREEN, 3)
