@@ -326,12 +326,19 @@ def block_position(mask: np.ndarray, x: int, y: int, radius: int) -> None:
         mask[r0:r1, c0:c1] |= disc[r0 - top : r1 - top, c0 - left : c1 - left]
 
 
-def sample_position(mask: np.ndarray, rng: np.random.Generator, radius: int) -> tuple[int, int]:
-    """A uniformly drawn free pixel (row-major order of the free ones), which is then blocked with ``radius``."""
-    free = np.flatnonzero(~mask)
-    if free.size == 0:
-        raise RuntimeError("no free spawn position left: too many coins for the arena (reduce num_coins)")
-    y, x = divmod(int(free[rng.integers(0, free.size)]), SCREEN)
+def sample_position(mask: np.ndarray, rng: np.random.Generator, radius: int, empty: bool = False) -> tuple[int, int]:
+    """A uniformly drawn free pixel (row-major order of the free ones), which is then blocked with ``radius``.
+
+    ``empty`` says that nothing is blocked yet, so the drawn index is the pixel itself.
+    """
+    if empty:
+        cell = int(rng.integers(0, SCREEN * SCREEN))
+    else:
+        free = np.flatnonzero(~mask)
+        if free.size == 0:
+            raise RuntimeError("no free spawn position left: too many coins for the arena (reduce num_coins)")
+        cell = int(free[rng.integers(0, free.size)])
+    y, x = divmod(cell, SCREEN)
     block_position(mask, x, y, radius)
     return x, y
 
@@ -391,18 +398,20 @@ class AgentPixels:
     def paste(
         self, frames: np.ndarray, local: np.ndarray, x: np.ndarray, y: np.ndarray, sprite: np.ndarray, where=None
     ) -> None:
-        """Paste agents into ``frames`` ((m, 84, 252) rows) at the frames ``local``, centred on (x, y).
+        """Paste agents into the frames ``local`` of ``frames`` ((m + 1, 84, 252) rows), centred on (x, y).
 
-        ``sprite`` is the heading index (heading // 45) of each; ``where`` ((m, 84, 252) of 0/255) restricts the
-        pixels (the holes, for an agent under the darkness).
+        The last frame of ``frames`` is scratch: pixels off the screen (or outside ``where``) are written there.
+        ``sprite`` is the heading index (heading // 45) of each agent; ``where`` ((m, 84, 252) of 0/255)
+        restricts the pixels (the holes, for an agent under the darkness).
         """
         px = x[:, None] + self.dx[sprite]
         py = y[:, None] + self.dy[sprite]
-        inside = (px.view(np.uint64) < SCREEN) & (py.view(np.uint64) < SCREEN)
         pixel = (local[:, None] * SCREEN + py) * SCREEN + px
+        valid = (px.view(np.uint64) < SCREEN) & (py.view(np.uint64) < SCREEN)
         if where is not None:
-            inside &= where.reshape(-1, 3)[np.where(inside, pixel, 0), 0] != 0
-        frames.reshape(-1, 3)[pixel[inside]] = self.colour[sprite][inside]
+            valid &= np.take(where.reshape(-1), 3 * pixel, mode="clip") != 0  # red byte of each pixel
+        scratch = (frames.shape[0] - 1) * SCREEN * SCREEN
+        frames.reshape(-1, 3)[np.where(valid, pixel, scratch)] = self.colour[sprite]
 
 
 @cache
@@ -533,7 +542,8 @@ class SearingSpotlightsCore(BatchedCore):
         self.spot_count = np.zeros(n, i64)
         self._grow_spots(8)
         # pictures, as (84, 252) rows per slot
-        self.frames = np.zeros((n, SCREEN, ROW_BYTES), np.uint8)
+        self.frame_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
+        self.frames = self.frame_buffer[:n]
         self.lit = np.zeros((2, n, SCREEN, ROW_BYTES), np.uint8)  # floor + coins + exit; blue and red floor
         self.holes = np.zeros((n * SCREEN, ROW_BYTES), np.uint8)  # 0/255 hole masks of the stepped slots
         self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: the span code gathered into ``holes``
@@ -676,7 +686,7 @@ class SearingSpotlightsCore(BatchedCore):
         mask = np.zeros((SCREEN, SCREEN), bool)
         self.heading[k] = int(rng.integers(0, 8))  # heading index (x 45 degrees): what rng.choice draws
         if opts["sample_agent_position"]:
-            x, y = sample_position(mask, rng, AGENT_BLOCK)
+            x, y = sample_position(mask, rng, AGENT_BLOCK, empty=True)
             x, y = x + int(rng.integers(2, 4)), y + int(rng.integers(2, 4))  # not clamped (kept quirk)
         else:
             x, y = CENTRE, CENTRE
@@ -719,9 +729,10 @@ class SearingSpotlightsCore(BatchedCore):
         self.hud[k] = paint_hud_row(self.endless, *self._hud_flags(k), (0, 0), 0, 0)
         self._build_lit(k)
         slot = np.array([k])
-        out = self.frames[k : k + 1]
+        out = np.zeros((2, SCREEN, ROW_BYTES), np.uint8)  # the frame and a scratch frame
         self._blend_slots(slot, np.array([0]), NO_HOLES, out)  # no holes yet
         self._finish_frames(slot, out)
+        self.frames[k] = out[0]
 
     def _hud_flags(self, k: int) -> tuple[bool, bool]:
         flags = int(self.hud_flags27[k]) // 27
@@ -738,7 +749,7 @@ class SearingSpotlightsCore(BatchedCore):
         mask = np.zeros((SCREEN, SCREEN), bool)
         if previous is not None:
             block_position(mask, previous[0], previous[1], AGENT_BLOCK)
-        cx, cy = sample_position(mask, rng, AGENT_BLOCK)
+        cx, cy = sample_position(mask, rng, AGENT_BLOCK, empty=previous is None)
         cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
         self.item_map[k] = 0
         self._place_coin(k, 0, _clamp_item(cx), _clamp_item(cy))
@@ -923,7 +934,8 @@ class SearingSpotlightsCore(BatchedCore):
         """Compose the frames of the stepped slots (see the module docstring)."""
         centre, base, drawn, near = spots
         holes = self._hole_masks(n, centre, base, drawn)
-        out = self.frames if isinstance(idx, slice) else np.empty((n, SCREEN, ROW_BYTES), np.uint8)
+        buffer = self.frame_buffer if isinstance(idx, slice) else np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
+        out = buffer[:n]
         np.bitwise_and(holes, self.lit[0][idx], out=out)
         self.hud[idx, ROW_BYTES // 2 :] = hud_tables()[1][hud_code]
         if hit.any():
@@ -933,12 +945,12 @@ class SearingSpotlightsCore(BatchedCore):
         # the hidden agent shows where it overlaps a hole
         fix = np.flatnonzero(near.any(axis=1))
         if fix.size:
-            self._paste_agents(out, fix, slots[fix], where=holes)
+            self._paste_agents(buffer, fix, slots[fix], where=holes)
         blend = self.alpha[idx] < self.blend_below[idx]
         if blend.any():
             local = np.flatnonzero(blend)
-            self._blend_slots(slots[local], local, holes, out)
-        self._finish_frames(idx, out)
+            self._blend_slots(slots[local], local, holes, buffer)
+        self._finish_frames(idx, buffer)
         if not isinstance(idx, slice):
             self.frames[idx] = out
 
@@ -955,7 +967,11 @@ class SearingSpotlightsCore(BatchedCore):
             )
 
     def _hole_masks(self, n: int, centre: np.ndarray, base: np.ndarray, drawn: np.ndarray) -> np.ndarray:
-        """(n, 84, 252) 0/255 masks of this step's spotlight holes, gathered row by row from the span table."""
+        """(n, 84, 252) 0/255 masks of this step's spotlight holes, gathered row by row from the span table.
+
+        Each disc row writes its span code into its frame row; one gather from the span table then yields every
+        row. Rows crossed by several spotlights keep one code and OR the other spans in, one layer at a time.
+        """
         tables = self.tables
         if n > 4:  # many slots: only the drawn spotlights
             local, j = np.nonzero(drawn)
@@ -976,14 +992,13 @@ class SearingSpotlightsCore(BatchedCore):
         table = span_rows()
         holes = self.holes[: n * SCREEN]
         np.take(table, index, axis=0, out=holes, mode="clip")
-        # rows crossed by several spotlights: OR the other spans in, one layer at a time
-        pending = index[keys] != codes
+        pending = index[keys] != codes  # spans that lost their row to another one
         if pending.any():
             keys, codes = keys[pending], codes[pending]
             hole_rows, table_rows = holes.view(ROW)[:, 0], table.view(ROW)[:, 0]
             while keys.size:
                 index[keys] = codes
-                first = index[keys] == codes
+                first = index[keys] == codes  # one span per row in this layer
                 target = keys[first]
                 merged = hole_rows[target].view(np.uint8) | table_rows[codes[first]].view(np.uint8)
                 hole_rows[target] = merged.view(ROW)
@@ -994,9 +1009,12 @@ class SearingSpotlightsCore(BatchedCore):
         """Paste the agents of ``slots`` into ``frames[local]`` (masked by ``where``, e.g. the holes)."""
         sprite = np.where(self.t[slots] > 0, self.heading[slots], 0)  # the reset frame shows it facing up
         scales = self.agent_scale[slots]
-        for scale in np.unique(scales):
+        if (scales == scales[0]).all():
+            agent_pixels(float(scales[0])).paste(frames, local, self.x[slots], self.y[slots], sprite, where)
+            return
+        for scale in set(scales.tolist()):
             same = scales == scale
-            pixels = agent_pixels(float(scale))
+            pixels = agent_pixels(scale)
             pixels.paste(frames, local[same], self.x[slots[same]], self.y[slots[same]], sprite[same], where)
 
     def _build_lit(self, k: int) -> None:
@@ -1006,27 +1024,34 @@ class SearingSpotlightsCore(BatchedCore):
         rows[0] = floor_rows(kind, False)
         rows[1] = floor_rows(kind, bool(self.red_feedback[k]))
         if self.coins_left[k]:
-            self._paste_entity(rows, k, "coins")
-        if self.use_exit[k]:
-            self._paste_entity(rows, k, "exit")
-
-    def _paste_entity(self, rows: np.ndarray, k: int, name: str) -> None:
-        """Paste one entity of slot k into ``rows`` ((84, 252), or a stack of them)."""
-        if name == "agent":
-            self._paste_agents(rows.reshape(-1, SCREEN, ROW_BYTES), np.zeros(1, np.intp), np.array([k]))
-        elif name == "coins":
             coin = coin_planes(float(self.coin_scale[k]))
             for j in np.flatnonzero(self.coin_alive[k]):
                 coin.paste(rows, self.coin_x[k, j], self.coin_y[k, j])
+        if self.use_exit[k]:
+            planes = exit_planes(float(self.exit_scale[k]), bool(self.exit_open[k]))
+            planes.paste(rows, self.exit_x[k], self.exit_y[k])
+
+    def _paste_entity(self, frames: np.ndarray, i: int, k: int, name: str) -> None:
+        """Paste one entity of slot k into frame ``i`` of ``frames`` (a buffer ending with a scratch frame)."""
+        if name == "agent":
+            self._paste_agents(frames, np.array([i]), np.array([k]))
+        elif name == "coins":
+            coin = coin_planes(float(self.coin_scale[k]))
+            for j in np.flatnonzero(self.coin_alive[k]):
+                coin.paste(frames[i], self.coin_x[k, j], self.coin_y[k, j])
         else:
-            exit_planes(float(self.exit_scale[k]), bool(self.exit_open[k])).paste(rows, self.exit_x[k], self.exit_y[k])
+            planes = exit_planes(float(self.exit_scale[k]), bool(self.exit_open[k]))
+            planes.paste(frames[i], self.exit_x[k], self.exit_y[k])
 
     def _coin_above(self, k: int) -> bool:
         """Whether slot k's coin is drawn above the darkness now (endless: also while it is new)."""
         return bool(self.coins_visible[k]) or (self.endless and self.t[k] < self.coin_shown_until[k])
 
     def _finish_frames(self, idx: Index, out: np.ndarray) -> None:
-        """Entities above the darkness, the HUD, then the entities that the reference draws after the HUD."""
+        """Entities above the darkness, the HUD, then the entities that the reference draws after the HUD.
+
+        ``out`` holds the frames of the slots ``idx`` followed by a scratch frame.
+        """
         special = self.any_visible[idx]
         if self.endless:
             special = special | (self.t[idx] < self.coin_shown_until[idx])
@@ -1035,22 +1060,27 @@ class SearingSpotlightsCore(BatchedCore):
         for i in special:
             k = int(slots[i])
             for name in self.orders[k][self._coin_above(k)][0]:
-                self._paste_entity(out[i], k, name)
-        out[:, :HUD_ROWS] = self.hud[idx][:, None]
+                self._paste_entity(out, i, k, name)
+        out[:-1, :HUD_ROWS] = self.hud[idx][:, None]
         for i in special:
             k = int(slots[i])
             for name in self.orders[k][self._coin_above(k)][1]:
-                self._paste_entity(out[i], k, name)
+                self._paste_entity(out, i, k, name)
 
     def _blend_slots(self, slots: np.ndarray, local: np.ndarray, holes: np.ndarray, out: np.ndarray) -> None:
         """Frames with a partly transparent darkness or with spotlight rings: lit in the holes, blended elsewhere.
 
-        ``slots`` are slot numbers, ``local`` their frames in ``holes`` ((n, 84, 252) of 0/255) and ``out``.
+        ``slots`` are slot numbers, ``local`` their frames in ``holes`` ((n, 84, 252) of 0/255) and in ``out``.
         """
-        lit = self.lit[(self.hit[slots] & self.red_feedback[slots]).astype(np.intp), slots]
+        buffer = np.empty((len(slots) + 1, SCREEN, ROW_BYTES), np.uint8)  # with a scratch frame
+        lit = buffer[:-1]
+        np.take(self.lit[0], slots, axis=0, out=lit)
+        red = np.flatnonzero(self.hit[slots] & self.red_feedback[slots])
+        if red.size:
+            lit[red] = self.lit[1, slots[red]]
         hidden = np.flatnonzero(self.agent_hidden[slots])
         if hidden.size:
-            self._paste_agents(lit, hidden, slots[hidden])
+            self._paste_agents(buffer, hidden, slots[hidden])
         alpha = self.alpha[slots]
         if alpha.any():
             dark = darken(lit, alpha[:, None, None])
@@ -1115,11 +1145,12 @@ class SearingSpotlightsCore(BatchedCore):
             pixels[top : top + disc.shape[0], left : left + disc.shape[1]] |= disc
         holes = np.repeat(pixels[margin:-margin, margin:-margin], 3, axis=1).astype(np.uint8) * 255
         dark = darken(floor, np.array(self.alpha[k]))
-        frame = dark ^ ((dark ^ floor) & holes)
+        frames = np.zeros((2, SCREEN, ROW_BYTES), np.uint8)  # the picture and a scratch frame
+        frames[0] = dark ^ ((dark ^ floor) & holes)
         if self.rings[k]:
-            self._draw_rings(k, frame, floor)
+            self._draw_rings(k, frames[0], floor)
         for name in ("coins", "agent") if self.endless else ("exit", "coins", "agent"):
             if name != "exit" or self.use_exit[k]:
-                self._paste_entity(frame, k, name)
-        frame[:HUD_ROWS] = self.hud[k]
-        return frame.reshape(SCREEN, SCREEN, 3)
+                self._paste_entity(frames, 0, k, name)
+        frames[0, :HUD_ROWS] = self.hud[k]
+        return frames[0].reshape(SCREEN, SCREEN, 3)
