@@ -295,6 +295,12 @@ def paint_hud_row(
 
 
 @cache
+def reset_hud_row(endless: bool, show_action: bool, show_reward: bool) -> np.ndarray:
+    """The HUD row of a reset frame: full health, grey no-op action blocks, no reward block yet."""
+    return paint_hud_row(endless, show_action, show_reward, (0, 0), 0, 0)
+
+
+@cache
 def hud_tables() -> tuple[np.ndarray, np.ndarray]:
     """Left halves by red width (0..42) and right halves by ``flags * 27 + a0 * 9 + a1 * 3 + reward_state``."""
     half = ROW_BYTES // 2
@@ -419,6 +425,20 @@ def agent_pixels(scale: float) -> AgentPixels:
     return AgentPixels(scale)
 
 
+ALPHA_STEPS = 258  # the darkness alpha is constant after at most 256 increments
+
+
+def alpha_schedule(duration: int, threshold: int) -> np.ndarray:
+    """The darkness alpha at steps 0, 1, ...: the reference's dimming rule, run until it is constant."""
+    alpha = 0 if duration > 0 else threshold
+    schedule = [alpha]
+    for _ in range(ALPHA_STEPS - 1):
+        if alpha <= threshold:  # SDL clamps the per-surface alpha to 255
+            alpha = min(alpha + int(255 / duration), 255) if duration > 0 else min(threshold, 255)
+        schedule.append(alpha)
+    return np.array(schedule, np.int16)
+
+
 # Per-episode settings of a slot, derived once per distinct set of options (see ``_episode_settings``).
 SETTINGS = np.dtype(
     [
@@ -439,11 +459,11 @@ SETTINGS = np.dtype(
         ("floor_kind", np.int64),
         ("red_feedback", bool),  # visual_feedback on a chessboard floor
         ("rings", bool),  # black_background: spotlights get a white outline
-        ("blend_below", np.int64),  # frames are blended while alpha < this (256 with rings: always)
-        ("dim_step", np.int64),  # alpha increase per step (0: the alpha stays at the threshold)
-        ("light_threshold", np.int64),
+        ("alphas", np.int16, (ALPHA_STEPS,)),  # darkness alpha at step t (the last entry from then on)
+        ("blend_until", np.int64),  # frames are blended before this step (partly transparent darkness, rings)
         ("spawn_interval", np.int64),
         ("hud_flags27", np.int64),  # 27 * (4 * endless + 2 * show_last_action + show_last_positive_reward)
+        ("hud_next", np.int64),  # hud_flags27 + 1: the base of the next step's HUD code
         ("agent_hidden", bool),
         ("any_visible", bool),  # some entity is drawn above the darkness
         ("coins_visible", bool),
@@ -482,14 +502,22 @@ SPOTS = np.dtype(
 EXIT_BIT, OPEN_EXIT_BIT = 1 << 14, 1 << 15
 
 
-def _disc_pixels(x: int, y: int, reach: float) -> tuple[slice, slice, np.ndarray]:
-    """The pixels whose distance to (x, y) is at most ``reach``, computed like pygame's distance_to (sqrt)."""
+@cache
+def touch_disc(reach: float) -> np.ndarray:
+    """Offsets (-r..r in y and x) whose distance is at most ``reach``, computed like pygame's distance_to."""
     r = int(math.floor(reach))
-    rows = slice(max(y - r, 0), min(y + r + 1, SCREEN))
-    cols = slice(max(x - r, 0), min(x + r + 1, SCREEN))
-    dy = np.arange(rows.start, rows.stop)[:, None] - y
-    dx = np.arange(cols.start, cols.stop)[None, :] - x
-    return rows, cols, np.sqrt(dx * dx + dy * dy) <= reach
+    offsets = np.arange(-r, r + 1)
+    return np.sqrt(offsets[None, :] ** 2 + offsets[:, None] ** 2) <= reach
+
+
+def mark_touch(item_map: np.ndarray, x: int, y: int, reach: float, bit: int) -> None:
+    """Set ``bit`` in the (84, 84) [y, x] map wherever an agent centre is within ``reach`` of (x, y)."""
+    disc = touch_disc(float(reach))
+    r = disc.shape[0] // 2
+    top, left = y - r, x - r
+    r0, c0 = max(top, 0), max(left, 0)
+    r1, c1 = min(top + disc.shape[0], SCREEN), min(left + disc.shape[1], SCREEN)
+    item_map[r0:r1, c0:c1] |= disc[r0 - top : r1 - top, c0 - left : c1 - left].astype(np.uint16) * np.uint16(bit)
 
 
 class SearingSpotlightsCore(BatchedCore):
@@ -511,6 +539,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.resolve(None)  # cross-checks of the constructor options
         n = self.num_envs
         self.all_slots = np.arange(n)
+        self.row_base = self.all_slots[:, None, None] * SCREEN  # first frame row of each slot
         self.settings = np.zeros(n, SETTINGS)
         for name in SETTINGS.names:  # attribute views of the settings columns
             setattr(self, name, self.settings[name])
@@ -519,7 +548,7 @@ class SearingSpotlightsCore(BatchedCore):
         # episode state
         i64 = np.int64
         for name in (
-            "t end_t_now alpha heading next_spawn spawns_left coins_collected coins_left num_coins "
+            "t end_t_now heading next_spawn spawns_left coins_collected coins_left num_coins "
             "coin_shown_until success exit_x exit_y next_hud"
         ).split():
             setattr(self, name, np.zeros(n, i64))
@@ -540,6 +569,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.unused_spot = self._unused_spot_record()
         self.spots = np.zeros((n, 0), SPOTS)
         self.spot_count = np.zeros(n, i64)
+        self.drawn_is_listed = False  # the "drawn" column equals "listed" for every slot
         self._grow_spots(8)
         # pictures, as (84, 252) rows per slot
         self.frame_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
@@ -593,16 +623,17 @@ class SearingSpotlightsCore(BatchedCore):
             record["floor_kind"] = FLOOR_CHESS
         record["red_feedback"] = opts["visual_feedback"] and record["floor_kind"] == FLOOR_CHESS
         record["rings"] = opts["black_background"]
-        record["blend_below"] = 256 if opts["black_background"] else 255
-        duration = opts["light_dim_off_duration"]
-        record["dim_step"] = int(255 / duration) if duration > 0 else 0
-        record["light_threshold"] = opts["light_threshold"]
+        alphas = alpha_schedule(opts["light_dim_off_duration"], opts["light_threshold"])
+        record["alphas"] = alphas
+        dark = np.flatnonzero(alphas == 255)
+        record["blend_until"] = NEVER if opts["black_background"] or not dark.size else dark[0]
         record["agent_hidden"] = not opts["agent_visible"]
         record["coins_visible"] = opts["coins_visible"]
         record["coin_scale"] = opts["coin_scale"]
         record["coin_reach"] = int(10 * opts["coin_scale"]) + radius
         record["any_visible"] = opts["agent_visible"] or opts["coins_visible"] or opts.get("exit_visible", False)
         record["hud_flags27"] = 27 * (4 * endless + 2 * opts["show_last_action"] + opts["show_last_positive_reward"])
+        record["hud_next"] = record["hud_flags27"] + 1
         agent = ("agent", 3, opts["agent_visible"])
         if endless:
             record["spawn_interval"] = opts["spawn_interval"]
@@ -667,6 +698,7 @@ class SearingSpotlightsCore(BatchedCore):
             self._grow_spots(2 * j)
         self.spots[k, j] = self._new_spot(k, self.rngs[k], self.slot_options[k])
         self.spot_count[k] = j + 1
+        self.drawn_is_listed = False
 
     # --------------------------------------------------------------------------------------------- reset
     def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
@@ -675,7 +707,6 @@ class SearingSpotlightsCore(BatchedCore):
         self._use_tables(int(opts["spot_max_radius"]))
         self.t[k] = 0
         self.end_t_now[k] = record["end_t"]
-        self.alpha[k] = 0 if opts["light_dim_off_duration"] > 0 else opts["light_threshold"]
         self.hit[k] = False
         self.hud_red[k] = 0
         self.next_spawn[k] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
@@ -697,9 +728,10 @@ class SearingSpotlightsCore(BatchedCore):
         if count > self.spots.shape[1]:
             self._grow_spots(max(count, 2 * self.spots.shape[1]))
         spots = self.spots[k]
-        spots[:] = self.unused_spot
         spots[:count] = [self._new_spot(k, rng, opts) for _ in range(count)]
+        spots[count:] = self.unused_spot
         self.spot_count[k] = count
+        self.drawn_is_listed = False
         self.item_map[k] = 0
         if self.endless:
             self.num_coins[k] = self.coins_left[k] = 1
@@ -726,13 +758,23 @@ class SearingSpotlightsCore(BatchedCore):
                 if num_coins == 0:
                     self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
         self.next_hud[k] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
-        self.hud[k] = paint_hud_row(self.endless, *self._hud_flags(k), (0, 0), 0, 0)
+        self.hud[k] = reset_hud_row(self.endless, *self._hud_flags(k))
         self._build_lit(k)
+        # the reset frame: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
         slot = np.array([k])
-        out = np.zeros((2, SCREEN, ROW_BYTES), np.uint8)  # the frame and a scratch frame
-        self._blend_slots(slot, np.array([0]), NO_HOLES, out)  # no holes yet
+        out = np.empty((2, SCREEN, ROW_BYTES), np.uint8)  # the frame and a scratch frame
+        out[0] = self.lit[0, k]
+        if self.agent_hidden[k]:
+            self._paste_agents(out, np.zeros(1, np.intp), slot)
+        alpha = int(self.alphas[k, 0])
+        if alpha:
+            out[0] = darken(out[0], np.array(alpha))
         self._finish_frames(slot, out)
         self.frames[k] = out[0]
+
+    def alpha(self, slots: np.ndarray | int) -> np.ndarray:
+        """The darkness alpha of the slots' current frames."""
+        return self.alphas[slots, np.minimum(self.t[slots], ALPHA_STEPS - 1)]
 
     def _hud_flags(self, k: int) -> tuple[bool, bool]:
         flags = int(self.hud_flags27[k]) // 27
@@ -741,8 +783,7 @@ class SearingSpotlightsCore(BatchedCore):
     def _place_coin(self, k: int, j: int, x: int, y: int) -> None:
         self.coin_x[k, j], self.coin_y[k, j] = x, y
         self.coin_alive[k, j] = True
-        rows, cols, touch = _disc_pixels(x, y, int(self.coin_reach[k]))
-        self.item_map[k, rows, cols] |= touch.astype(np.uint16) << j
+        mark_touch(self.item_map[k], x, y, int(self.coin_reach[k]), 1 << j)
 
     def _spawn_endless_coin(self, k: int, rng: np.random.Generator, previous: tuple[int, int] | None) -> None:
         """A new coin: the sampler is cleared, the old coin's place blocked, then a draw (the reference's order)."""
@@ -768,13 +809,10 @@ class SearingSpotlightsCore(BatchedCore):
         self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
         # 2. the HUD shows the previous action and whether the previous reward was positive (decided in step 8)
         hud_code = np.array(self.next_hud[idx])  # a copy: next_hud is updated below
-        # 3. the light dims until the threshold is passed
-        alpha = self.alpha[idx]
-        alpha = np.minimum(alpha + self.dim_step[idx] * (alpha <= self.light_threshold[idx]), 255)
-        self.alpha[idx] = alpha
-        # 4. spotlights: maybe spawn one, then draw, move and hit-test every spotlight in list order
+        # 3. the light dims until the threshold is passed: the alpha of step t is ``alpha(k)``
         t = self.t[idx] + 1
         self.t[idx] = t
+        # 4. spotlights: maybe spawn one, then draw, move and hit-test every spotlight in list order
         spawn = t == self.next_spawn[idx]
         if spawn.any():
             self._spawn_spots(slots[spawn])
@@ -798,7 +836,7 @@ class SearingSpotlightsCore(BatchedCore):
         if dead is not None:
             terminated |= dead
         # 8. the HUD of the next step shows this action and whether this reward was positive
-        self.next_hud[idx] = self.hud_flags27[idx] + 3 * act + 1 + (rewards > 0)
+        self.next_hud[idx] = self.hud_next[idx] + 3 * act + (rewards > 0)
         self._draw(idx, slots, n, hit, hud_code, spots)
         return rewards, terminated
 
@@ -862,8 +900,7 @@ class SearingSpotlightsCore(BatchedCore):
                     self.exit_open[k] = True
                     taken = True
                     self.item_map[k] &= np.uint16(~OPEN_EXIT_BIT & 0xFFFF)
-                    rows, cols, touch = _disc_pixels(int(self.exit_x[k]), int(self.exit_y[k]), self.exit_reach[k])
-                    self.item_map[k, rows, cols] |= touch.astype(np.uint16) * np.uint16(EXIT_BIT)
+                    mark_touch(self.item_map[k], int(self.exit_x[k]), int(self.exit_y[k]), self.exit_reach[k], EXIT_BIT)
                 reached = math.sqrt((self.exit_x[k] - x) ** 2 + (self.exit_y[k] - y) ** 2) <= self.exit_reach[k]
                 if reached:
                     rewards[i] += self.reward_exit[k]
@@ -907,12 +944,16 @@ class SearingSpotlightsCore(BatchedCore):
             tau = np.where(drawn, tau + spots["speed"], tau)
         else:
             tau = tau + spots["speed"]
-        columns = {"tau": np.minimum(tau, 1.0), "done": tau >= 1.0, "centre": centre, "drawn": drawn}
+        store = self.spots if isinstance(idx, slice) else None
+        columns = {"tau": np.minimum(tau, 1.0), "done": tau >= 1.0, "centre": centre}
+        if removed is not None or store is None or not self.drawn_is_listed:
+            columns["drawn"] = drawn  # (else every listed spotlight was drawn in this and the last step)
+            self.drawn_is_listed = removed is None and store is not None
         for name, value in columns.items():
-            if isinstance(idx, slice):
-                self.spots[name] = value
-            else:
+            if store is None:
                 self.spots[name][idx] = value
+            else:
+                store[name] = value
         if removed is not None and removed.any():
             base = base.copy()  # a view of the arrays that the removal compacts
             self._remove_spots(idx, removed)
@@ -931,6 +972,7 @@ class SearingSpotlightsCore(BatchedCore):
 
     # ---------------------------------------------------------------------------------------------- draw
     def _draw(self, idx: Index, slots: np.ndarray, n: int, hit: np.ndarray, hud_code: np.ndarray, spots) -> None:
+        t = self.t[idx]
         """Compose the frames of the stepped slots (see the module docstring)."""
         centre, base, drawn, near = spots
         holes = self._hole_masks(n, centre, base, drawn)
@@ -946,7 +988,7 @@ class SearingSpotlightsCore(BatchedCore):
         fix = np.flatnonzero(near.any(axis=1))
         if fix.size:
             self._paste_agents(buffer, fix, slots[fix], where=holes)
-        blend = self.alpha[idx] < self.blend_below[idx]
+        blend = t < self.blend_until[idx]
         if blend.any():
             local = np.flatnonzero(blend)
             self._blend_slots(slots[local], local, holes, buffer)
@@ -978,7 +1020,7 @@ class SearingSpotlightsCore(BatchedCore):
             centre, base = centre[local, j], base[local, j]
             row_base = local[:, None] * SCREEN
         else:
-            row_base = self.all_slots[:n, None, None] * SCREEN
+            row_base = self.row_base[:n]
         codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (..., disc rows)
         rows = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
         codes *= rows != 0
@@ -1052,11 +1094,13 @@ class SearingSpotlightsCore(BatchedCore):
 
         ``out`` holds the frames of the slots ``idx`` followed by a scratch frame.
         """
-        special = self.any_visible[idx]
-        if self.endless:
-            special = special | (self.t[idx] < self.coin_shown_until[idx])
-        special = np.flatnonzero(special)
         slots = self.all_slots[idx]
+        if self.endless:
+            special = np.flatnonzero(self.any_visible[idx] | (self.t[idx] < self.coin_shown_until[idx]))
+        elif self.any_visible.any():
+            special = np.flatnonzero(self.any_visible[idx])
+        else:
+            special = ()
         for i in special:
             k = int(slots[i])
             for name in self.orders[k][self._coin_above(k)][0]:
@@ -1081,7 +1125,7 @@ class SearingSpotlightsCore(BatchedCore):
         hidden = np.flatnonzero(self.agent_hidden[slots])
         if hidden.size:
             self._paste_agents(buffer, hidden, slots[hidden])
-        alpha = self.alpha[slots]
+        alpha = self.alpha(slots)
         if alpha.any():
             dark = darken(lit, alpha[:, None, None])
             blended = dark ^ ((dark ^ lit) & holes[local])
@@ -1110,7 +1154,7 @@ class SearingSpotlightsCore(BatchedCore):
                 window[disc[r0 - top : r1 - top, c0 - left : c1 - left]] = 1
                 window[ring[r0 - top : r1 - top, c0 - left : c1 - left]] = 2
         outline = np.repeat(state == 2, 3, axis=1)
-        frame[outline] = lighten(under, int(self.alpha[k]))[outline]
+        frame[outline] = lighten(under, int(self.alpha(k)))[outline]
 
     # ------------------------------------------------------------------------------------------ faces
     def _observation(self, idx: Index) -> np.ndarray:
@@ -1144,7 +1188,7 @@ class SearingSpotlightsCore(BatchedCore):
             top, left = int(centre.imag) + offset + margin, int(centre.real) + offset + margin
             pixels[top : top + disc.shape[0], left : left + disc.shape[1]] |= disc
         holes = np.repeat(pixels[margin:-margin, margin:-margin], 3, axis=1).astype(np.uint8) * 255
-        dark = darken(floor, np.array(self.alpha[k]))
+        dark = darken(floor, np.array(self.alpha(k)))
         frames = np.zeros((2, SCREEN, ROW_BYTES), np.uint8)  # the picture and a scratch frame
         frames[0] = dark ^ ((dark ^ floor) & holes)
         if self.rings[k]:
