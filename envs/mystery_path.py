@@ -29,7 +29,7 @@ import numpy as np
 
 from envs.core import BatchedCore, Index
 from envs.drawing import SCREEN, Sprite, agent_sprites, blend, pygame, round_half_away, surface_to_sprite
-from envs.movement import clamp_centre, continuous_heading, continuous_velocity, grid_step
+from envs.movement import continuous_heading, continuous_velocity, grid_step
 from envs.mystery_path_generator import generate_path
 from envs.options import Option
 
@@ -37,6 +37,7 @@ GRID = 7  # tiles per side of a level (and of an endless segment)
 TILE = SCREEN // GRID  # 12 px
 SEGMENT_COLUMNS = GRID + 1  # an endless segment plus its transition tile
 INITIAL_SEGMENTS = 3
+SCALAR_SLOTS = 2  # up to this many slots per step are stepped one by one (see MysteryPathCore._step)
 GRID_AGENT_SCALE = 0.25  # the grid variant ignores agent_scale
 
 ORIGIN_COLOUR = (0, 0, 255)
@@ -50,20 +51,78 @@ DEBUG_PATH_ALPHA = 200
 STAMINA_BAR_WIDTH = 4
 STAMINA_GREEN, STAMINA_RED = (0, 255, 0), (255, 0, 0)
 
+# Free movement: an action pair (horizontal, vertical) is coded as 3 * horizontal + vertical. Endless actions are
+# 0 none, 1 right, 2 up, 3 down. Heading -1 means "unchanged".
+FREE_ACTIONS = np.array([(h, v) for h in range(3) for v in range(3)], dtype=np.int64)
+ENDLESS_ACTIONS = np.array([[0, 0], [2, 0], [0, 1], [0, 2]], dtype=np.int64)
+FREE_HEADINGS = continuous_heading(FREE_ACTIONS, np.full(len(FREE_ACTIONS), -1))
+ENDLESS_HEADINGS = continuous_heading(ENDLESS_ACTIONS, np.full(len(ENDLESS_ACTIONS), -1))
+
+
+def _grid_transitions() -> np.ndarray:
+    """Grid movement as a table: state ``4 * tile + heading // 90`` and action -> next state (tile = 7 * x + y)."""
+    state = np.arange(GRID * GRID * 4)
+    tile, quarter = state // 4, state % 4
+    table = np.empty((len(state), 4), dtype=np.int64)
+    for action in range(4):
+        x, y, heading = grid_step(np.full(len(state), action), tile // GRID, tile % GRID, quarter * 90, GRID)
+        table[:, action] = (x * GRID + y) * 4 + heading // 90
+    return table
+
+
+GRID_NEXT = _grid_transitions()
+TILE_OF_PIXEL = (np.arange(SCREEN)[:, None] // TILE) * GRID + np.arange(SCREEN)[None, :] // TILE  # [x, y] -> tile
+TILE_CENTRES = np.array([(x * TILE + TILE // 2, y * TILE + TILE // 2) for x in range(GRID) for y in range(GRID)])
+
+# What a Mystery Path tile is for the agent; a visited NEW tile becomes PATH.
+OFF, PATH, NEW, GOAL = 0, 1, 2, 3
+AFTER_VISIT = np.array([OFF, PATH, PATH, GOAL], dtype=np.int64)
+# Endless path tiles: flags for "pays progress on the next visit" and "refills stamina on the next visit".
+NEW_TILE, REFILL = 1, 2
+
 # Endless ground truth: the direction from the current tile to the next path tile.
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.int64)  # east, north, south
 EAST, NORTH, SOUTH, WEST = 0, 1, 2, -1
 
-# Column kinds of one band (tile row) of the endless view, and the colour of each kind in the band's edge rows
-# (the first and last pixel row of a tile) and middle rows.
-KIND_BLACK, KIND_BORDER, KIND_ICE, KIND_PATH = 0, 1, 2, 3
-EDGE_ROW = np.array([(0, 0, 0), TILE_BORDER, TILE_BORDER, TILE_BORDER], dtype=np.uint8)
-MIDDLE_ROW = np.array([(0, 0, 0), TILE_BORDER, ICE_COLOUR, PATH_COLOUR], dtype=np.uint8)
-TILE_KINDS = np.array([KIND_BORDER] + [KIND_PATH] * (TILE - 2) + [KIND_BORDER], dtype=np.int8)
-BAND_PAD = TILE  # band rows are padded by one tile on both sides so that tiles need no clipping
+# The endless floor is drawn band by band: a band is one tile row of the screen, and all its pixel rows equal either
+# its "edge" row (first and last row of a tile) or its "middle" row. Bands are padded by one tile on both sides so
+# that tiles need no clipping.
+BAND_PAD = TILE
+BAND_WIDTH = SCREEN + 2 * BAND_PAD
+TILE_EDGE_BYTES = np.tile(np.array(TILE_BORDER, dtype=np.uint8), TILE)
+TILE_MIDDLE_BYTES = np.concatenate([TILE_BORDER, np.tile(PATH_COLOUR, TILE - 2), TILE_BORDER]).astype(np.uint8)
+TILE_BYTE_OFFSETS = np.arange(TILE * 3)
+PATH_TILE = np.empty((TILE, TILE, 3), dtype=np.uint8)  # a past-path tile: white with a grey 1-px border
+PATH_TILE[:] = TILE_BORDER
+PATH_TILE[1:-1, 1:-1] = PATH_COLOUR
+BLACK_FLOOR = TILE  # row of the background band tables below
 
-# Endless action -> (horizontal, vertical) of the free controller: no-op, right, up, down.
-ENDLESS_ACTIONS = np.array([[0, 0], [2, 0], [0, 1], [0, 2]], dtype=np.int64)
+
+def _background_bands() -> tuple[np.ndarray, np.ndarray]:
+    """Edge and middle rows of the endless background: rows 0..11 ice scrolled by that many px, row 12 black."""
+    edge = np.zeros((TILE + 1, SCREEN, 3), dtype=np.uint8)
+    middle = np.zeros((TILE + 1, SCREEN, 3), dtype=np.uint8)
+    for phase in range(TILE):
+        local = (np.arange(SCREEN) + phase) % TILE
+        border = (local == 0) | (local == TILE - 1)
+        edge[phase] = TILE_BORDER
+        middle[phase] = np.where(border[:, None], TILE_BORDER, ICE_COLOUR)
+    return edge, middle
+
+
+BACKGROUND_EDGE, BACKGROUND_MIDDLE = _background_bands()
+
+
+def _stamina_bars() -> np.ndarray:
+    """The stamina bar for every red height 0..84: (85, 84, 4, 3)."""
+    bars = np.empty((SCREEN + 1, SCREEN, STAMINA_BAR_WIDTH, 3), dtype=np.uint8)
+    bars[:] = STAMINA_GREEN
+    for height in range(SCREEN + 1):
+        bars[height, :height] = STAMINA_RED
+    return bars
+
+
+STAMINA_BARS = _stamina_bars()
 
 
 def option_specs(grid: bool, endless: bool) -> dict[str, Option]:
@@ -122,34 +181,11 @@ def fall_off_cross() -> Sprite:
 
 @cache
 def _ice_background(phase: int) -> np.ndarray:
-    """The endless view's ice floor scrolled by ``phase`` px (0..11) to the left."""
-    kinds = _BACKGROUND_KINDS[phase]
-    band = np.where(_TILE_EDGE_ROWS[:, None, None], EDGE_ROW[kinds][None], MIDDLE_ROW[kinds][None])
-    return np.ascontiguousarray(np.tile(band, (GRID, 1, 1)))
-
-
-def _background_kinds() -> np.ndarray:
-    """Column kinds of the endless background: rows 0..11 the ice floor at each scroll phase, row 12 black."""
-    kinds = np.full((TILE + 1, SCREEN), KIND_BLACK, dtype=np.int8)
-    for phase in range(TILE):
-        local = (np.arange(SCREEN) + phase) % TILE
-        kinds[phase] = np.where((local == 0) | (local == TILE - 1), KIND_BORDER, KIND_ICE)
-    return kinds
-
-
-_BACKGROUND_KINDS = _background_kinds()
-_BLACK_BACKGROUND = TILE  # row of _BACKGROUND_KINDS
-_TILE_EDGE_ROWS = np.isin(np.arange(TILE), (0, TILE - 1))
-
-
-@cache
-def _stamina_bars() -> np.ndarray:
-    """The stamina bar for every red height 0..84: (85, 84, 4, 3)."""
-    bars = np.empty((SCREEN + 1, SCREEN, STAMINA_BAR_WIDTH, 3), dtype=np.uint8)
-    bars[:] = STAMINA_GREEN
-    for height in range(SCREEN + 1):
-        bars[height, :height] = STAMINA_RED
-    return bars
+    """The endless view's ice floor scrolled by ``phase`` px (0..11) to the left, as a whole picture."""
+    band = np.empty((TILE, SCREEN, 3), dtype=np.uint8)
+    band[:] = BACKGROUND_MIDDLE[phase]
+    band[0] = band[TILE - 1] = BACKGROUND_EDGE[phase]
+    return np.tile(band, (GRID, 1, 1))
 
 
 # -------------------------------------------------------------------------------------------------- canvas
@@ -193,9 +229,9 @@ class _SpriteSheet:
 class _Canvas:
     """The frames of all slots, with a margin around each so that sprites can be pasted without clipping."""
 
-    def __init__(self, num_envs: int, margin: int) -> None:
+    def __init__(self, num_envs: int) -> None:
         self.num_envs = num_envs
-        self._allocate(margin)
+        self._allocate(0)
 
     def _allocate(self, margin: int) -> None:
         self.margin = margin
@@ -207,7 +243,8 @@ class _Canvas:
         self.bands = self.view.reshape(self.num_envs, GRID, TILE, SCREEN, 3)
         assert np.shares_memory(self.bands, self.buffer)
         self.row_bytes = side * 3
-        self.slot_bytes = side * side * 3
+        # Byte position of each slot's visible top-left pixel.
+        self.origin = np.arange(self.num_envs) * (side * side * 3) + margin * (self.row_bytes + 3)
 
     def fit(self, sheet: _SpriteSheet) -> None:
         """Grow the margin (keeping the frames) until every sprite of ``sheet`` fits into it."""
@@ -217,16 +254,26 @@ class _Canvas:
             self._allocate(need)
             self.view[:] = frames
 
-    def paste(self, sheet: _SpriteSheet, slots: np.ndarray, ids: np.ndarray, top: np.ndarray, left: np.ndarray) -> None:
-        """Paste sprite ``ids[i]`` of ``sheet`` into slot ``slots[i]`` with its top-left at (top[i], left[i])."""
-        if len(slots) == 0:
-            return
+    def paste(
+        self,
+        sheet: _SpriteSheet,
+        slots: np.ndarray,
+        ids: np.ndarray,
+        top: np.ndarray,
+        left: np.ndarray,
+        may_leave_screen: bool = False,
+    ) -> None:
+        """Paste sprite ``ids[i]`` of ``sheet`` into slot ``slots[i]`` with its top-left at (top[i], left[i]).
+
+        Sprites at least partly on the screen need no clipping (the margin is as wide as the largest sprite).
+        ``may_leave_screen`` moves sprites that are entirely off the screen into the margin.
+        """
         offsets, colours = sheet.tables(self.row_bytes)
-        m = self.margin
-        # A sprite entirely outside the screen is moved to the margin; partly visible ones are never moved.
-        top = np.clip(top, -m, SCREEN + m - sheet.heights[ids])
-        left = np.clip(left, -m, SCREEN + m - sheet.widths[ids])
-        base = slots * self.slot_bytes + (top + m) * self.row_bytes + (left + m) * 3
+        if may_leave_screen:
+            m = self.margin
+            top = np.minimum(np.maximum(top, -m), SCREEN + m - sheet.heights[ids])
+            left = np.minimum(np.maximum(left, -m), SCREEN + m - sheet.widths[ids])
+        base = self.origin[slots] + top * self.row_bytes + left * 3
         self.flat[base[:, None] + offsets[ids]] = colours[ids]
 
 
@@ -251,64 +298,60 @@ class MysteryPathCore(BatchedCore):
         super().__init__(num_envs, options)
         n = self.num_envs
         self.all_slots = np.arange(n)
-        # Agent: centre pixel (world coordinates in the endless variant), heading, where a fall-off returns it to.
-        self.x = np.zeros(n, dtype=np.int64)
-        self.y = np.zeros(n, dtype=np.int64)
+        # Agent: centre pixel (x, y) (world coordinates in the endless variant), heading, and where a fall-off puts
+        # it back (the free agent is placed `radius` px into the first tile: its centre only with the default scale).
+        self.pos = np.zeros((n, 2), dtype=np.int64)
+        self.return_pos = np.zeros((n, 2), dtype=np.int64)
         self.heading = np.zeros(n, dtype=np.int64)
-        self.return_x = np.zeros(n, dtype=np.int64)
-        self.return_y = np.zeros(n, dtype=np.int64)
-        self.off_path = np.zeros(n, dtype=bool)
+        self.velocity = np.zeros((n, len(ENDLESS_ACTIONS if endless else FREE_ACTIONS), 2), dtype=np.int64)
+        self.off_path = np.zeros(n, dtype=bool)  # fell off in the last step: goes back this step
         self.cross_visible = np.zeros(n, dtype=bool)
-        self.cross_x = np.zeros(n, dtype=np.int64)  # cross centre on the screen
-        self.cross_y = np.zeros(n, dtype=np.int64)
         self.t = np.zeros(n, dtype=np.int64)
         self.num_fails = np.zeros(n, dtype=np.int64)
-        # Per-episode options as arrays.
         self.max_steps = np.zeros(n, dtype=np.int64)
-        self.speed = np.zeros(n, dtype=np.float64)
-        self.radius = np.zeros(n, dtype=np.int64)
         self.visual_feedback = np.zeros(n, dtype=bool)
-        self.reward_fall_off = np.zeros(n, dtype=np.float64)
-        self.reward_path_progress = np.zeros(n, dtype=np.float64)
-        self.reward_step = np.zeros(n, dtype=np.float64)
+        self.reward_table = np.zeros((n, 4), dtype=np.float64)  # reward of a step, by what the agent stepped on
         # Drawing.
         self.agents = _SpriteSheet()
         self.crosses = _SpriteSheet()
         self.cross_id = self.crosses.add((fall_off_cross(),))
-        self.agent_sprite0 = np.zeros(n, dtype=np.int64)  # sprite id of heading 0 for the slot's agent scale
-        self.agent_half = np.zeros(n, dtype=np.int64)  # sprite side // 2 (top-left = centre - half)
-        self.canvas = _Canvas(n, 0)
+        self.sprite0 = np.zeros(n, dtype=np.int64)  # sprite id of heading 0 at the slot's agent scale
+        self.half = np.zeros(n, dtype=np.int64)  # sprite side // 2: top-left = centre - half
+        self.canvas = _Canvas(n)
         self.canvas.fit(self.crosses)
         if endless:
             self._init_endless(n)
         else:
             self._init_level(n)
 
-    # ------------------------------------------------------------------------------------------- state
     def _init_level(self, n: int) -> None:
-        self.cell_x = np.zeros(n, dtype=np.int64)  # grid variant: the agent's tile
-        self.cell_y = np.zeros(n, dtype=np.int64)
-        self.on_path = np.zeros((n, GRID, GRID), dtype=bool)  # [slot, x, y]
-        self.unrewarded = np.zeros((n, GRID, GRID), dtype=bool)  # path tiles that still pay progress
-        self.goal_x = np.zeros(n, dtype=np.int64)
-        self.goal_y = np.zeros(n, dtype=np.int64)
-        self.reward_goal = np.zeros(n, dtype=np.float64)
+        self.status = np.zeros((n, GRID * GRID), dtype=np.int64)  # OFF / PATH / NEW / GOAL per tile 7 * x + y
         self.success = np.zeros(n, dtype=np.int64)
         self.background = np.zeros((n, SCREEN, SCREEN, 3), dtype=np.uint8)
         self.levels: list[Any] = [None] * n  # (origin, goal, layout) per slot, for the debug view
+        self.pos_low = np.zeros((n, 1), dtype=np.int64)  # free agent: the centre stays `radius` px inside the screen
+        self.pos_high = np.zeros((n, 1), dtype=np.int64)
+        self.grid_state = np.zeros(n, dtype=np.int64)  # grid agent: 4 * tile + heading // 90
+        self.origin_state = np.zeros(n, dtype=np.int64)  # 4 * origin tile
 
     def _init_endless(self, n: int) -> None:
         # The path as one chain of tiles (origin first), grown segment by segment; capacities grow on demand.
-        self.chain_x = np.zeros((n, 64), dtype=np.int64)
-        self.chain_y = np.zeros((n, 64), dtype=np.int64)
-        self.direction = np.full((n, 64), WEST, dtype=np.int64)  # from chain tile i to tile i + 1
-        self.unrewarded = np.zeros((n, 64), dtype=bool)
-        self.refills_stamina = np.zeros((n, 64), dtype=bool)
-        self.chain_length = np.zeros(n, dtype=np.int64)
-        self.tile_node = np.full((n, INITIAL_SEGMENTS * SEGMENT_COLUMNS + SEGMENT_COLUMNS, GRID), -1, np.int64)
+        capacity = 64
+        self.chain_x = np.zeros((n, capacity), dtype=np.int64)
+        self.chain_y = np.zeros((n, capacity), dtype=np.int64)
+        self.direction = np.full((n, capacity), WEST, dtype=np.int64)  # from chain tile i to tile i + 1
+        self.flags = np.zeros((n, capacity), dtype=np.int64)  # NEW_TILE | REFILL
+        self.walk_start = np.zeros((n, capacity), dtype=np.int64)  # first tile drawn behind an agent on tile i
+        self.chain_lists: list[tuple[list[int], list[int]]] = [([], []) for _ in range(n)]
+        # tile_node[slot, x, y + 1]: chain index of a path tile or -1; rows 0 and 8 catch agents above and below.
+        self.tile_node = np.full((n, (INITIAL_SEGMENTS + 1) * SEGMENT_COLUMNS, GRID + 2), -1, dtype=np.int64)
         self.num_segments = np.zeros(n, dtype=np.int64)
+        self.segment_ends: list[list[int]] = [[] for _ in range(n)]  # chain length after each segment
+        self.walks_until = np.zeros(n, dtype=np.int64)  # walk_start is known for the chain tiles before this
+        self.prepare_at = np.zeros(n, dtype=np.int64)  # x pixel of the next segment (see _enter_segment)
         self.last_goal_y = np.zeros(n, dtype=np.int64)
         self.current_node = np.zeros(n, dtype=np.int64)
+        self.draw_from = np.zeros(n, dtype=np.int64)  # past path: chain tiles draw_from .. current_node - 1
         self.ground_truth = np.zeros(n, dtype=np.int64)  # index into DIRECTIONS
         self.stamina = np.zeros(n, dtype=np.int64)
         self.stamina_level = np.zeros(n, dtype=np.int64)
@@ -319,40 +362,36 @@ class MysteryPathCore(BatchedCore):
         self.camera_offset = np.zeros(n, dtype=np.float64)
         self.bg_scroll = np.zeros(n, dtype=np.float64)
         self.agent_screen_left = np.zeros(n, dtype=np.int64)
-        self.depth = np.zeros(n, dtype=np.int64)  # past-path walk: columns behind the agent
+        self.depth = np.zeros(n, dtype=np.int64)  # columns of past path drawn behind the agent's column
         self.show_past_path = np.zeros(n, dtype=bool)
         self.show_background = np.zeros(n, dtype=bool)
         self.show_stamina = np.zeros(n, dtype=bool)
 
-    def _set_agent_scale(self, k: int, scale: float) -> None:
+    # ------------------------------------------------------------------------------------------- reset
+    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
+        scale = GRID_AGENT_SCALE if self.grid else opts["agent_scale"]
         first = self.agents.add(agent_sprites(scale))
         self.canvas.fit(self.agents)
-        self.agent_sprite0[k] = first
-        self.agent_half[k] = self.agents.sprites[first].width // 2
-        self.radius[k] = int(25 * scale)
-
-    def _reset_common(self, k: int, opts: dict[str, Any]) -> None:
+        self.sprite0[k] = first
+        self.half[k] = self.agents.sprites[first].width // 2
+        radius = int(25 * scale)
+        if not self.grid:
+            actions = ENDLESS_ACTIONS if self.endless else FREE_ACTIONS
+            vx, vy = continuous_velocity(actions, np.full(len(actions), float(opts["agent_speed"])))
+            self.velocity[k] = np.stack([vx, vy], axis=1).astype(np.int64)
         self.t[k] = 0
         self.max_steps[k] = opts["max_steps"]
         self.num_fails[k] = 0
         self.off_path[k] = False
         self.cross_visible[k] = False
         self.visual_feedback[k] = opts["visual_feedback"]
-        self.reward_fall_off[k] = opts["reward_fall_off"]
-        self.reward_path_progress[k] = opts["reward_path_progress"]
-        self.reward_step[k] = opts["reward_step"]
-        self.speed[k] = opts.get("agent_speed", 0.0)
-        self._set_agent_scale(k, GRID_AGENT_SCALE if self.grid else opts["agent_scale"])
-
-    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
-        self._reset_common(k, opts)
         if self.endless:
-            self._reset_endless(k, rng, opts)
+            self._reset_endless(k, rng, opts, radius)
         else:
-            self._reset_level(k, rng, opts)
-        self._draw(np.array([k]))
+            self._reset_level(k, rng, opts, radius)
+        self._draw_slot(k)
 
-    def _reset_level(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
+    def _reset_level(self, k: int, rng: np.random.Generator, opts: dict[str, Any], radius: int) -> None:
         choice = opts["cardinal_origin_choice"]
         side = choice[int(rng.integers(0, len(choice)))]
         first, second = int(rng.integers(0, GRID)), int(rng.integers(0, GRID))
@@ -365,26 +404,28 @@ class MysteryPathCore(BatchedCore):
         }[side]
         layout = generate_path(rng, GRID, GRID, origin, goal)
         self.levels[k] = (origin, goal, layout)
-        self.on_path[k] = False
-        self.unrewarded[k] = False
-        for tile in layout.path:
-            self.on_path[k][tile] = True
-        for tile in layout.path[1:-1]:
-            self.unrewarded[k][tile] = True
-        self.goal_x[k], self.goal_y[k] = goal
-        self.reward_goal[k] = opts["reward_goal"]
+        status = self.status[k]
+        status[:] = OFF
+        for x, y in layout.path[1:-1]:
+            status[x * GRID + y] = NEW
+        status[origin[0] * GRID + origin[1]] = PATH
+        status[goal[0] * GRID + goal[1]] = GOAL
+        # Rewards are summed in the reference's order: 0, then the event's reward, then the step reward.
+        step = opts["reward_step"]
+        self.reward_table[k, OFF] = (0 + opts["reward_fall_off"]) + step
+        self.reward_table[k, PATH] = 0 + step
+        self.reward_table[k, NEW] = (0 + opts["reward_path_progress"]) + step
+        self.reward_table[k, GOAL] = (0 + opts["reward_goal"]) + step
         self.success[k] = 0
         self.heading[k] = 0
         if self.grid:
-            # The grid agent stands on tile centres; it returns to the origin's tile.
-            self.cell_x[k], self.cell_y[k] = origin
-            self.return_x[k], self.return_y[k] = origin
-            self.x[k], self.y[k] = origin[0] * TILE + TILE // 2, origin[1] * TILE + TILE // 2
+            self.origin_state[k] = (origin[0] * GRID + origin[1]) * 4
+            self.grid_state[k] = self.origin_state[k]  # heading up
+            self.pos[k] = TILE_CENTRES[origin[0] * GRID + origin[1]]
         else:
-            # The free agent is placed `radius` px into the origin tile (its centre only with the default scale).
-            self.return_x[k] = origin[0] * TILE + self.radius[k]
-            self.return_y[k] = origin[1] * TILE + self.radius[k]
-            self.x[k], self.y[k] = self.return_x[k], self.return_y[k]
+            self.return_pos[k] = (origin[0] * TILE + radius, origin[1] * TILE + radius)
+            self.pos[k] = self.return_pos[k]
+            self.pos_low[k], self.pos_high[k] = radius, SCREEN - radius
         background = self.background[k]
         background[:] = 0
         if opts["show_origin"]:
@@ -392,21 +433,30 @@ class MysteryPathCore(BatchedCore):
         if opts["show_goal"]:
             _fill_tile(background, goal, GOAL_COLOUR)
 
-    def _reset_endless(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
-        self.chain_length[k] = 0
+    def _reset_endless(self, k: int, rng: np.random.Generator, opts: dict[str, Any], radius: int) -> None:
+        self.depth[k] = int(opts["camera_offset_scale"])
+        self.show_past_path[k] = opts["show_past_path"]
+        self.show_background[k] = opts["show_background"]
+        self.show_stamina[k] = opts["show_stamina"]
+        self.chain_lists[k] = ([], [])
+        self.segment_ends[k] = []
         self.num_segments[k] = 0
+        self.walks_until[k] = 0
         self.tile_node[k] = -1
-        self.unrewarded[k] = False
         for _ in range(INITIAL_SEGMENTS):
             self._add_segment(k, rng)
-        self.unrewarded[k, 0] = False  # the very first tile pays nothing
+        self._enter_segment(k, 0)
+        self.flags[k, 0] &= ~NEW_TILE  # the very first tile pays nothing
         self.current_node[k] = 0
+        self.draw_from[k] = 0
         self.ground_truth[k] = self.direction[k, 0]  # never west: the first tile is in column 0
         self.heading[k] = 270  # facing right
-        self.return_x[k] = self.chain_x[k, 0] * TILE + self.radius[k]
-        self.return_y[k] = self.chain_y[k, 0] * TILE + self.radius[k]
-        self.x[k], self.y[k] = self.return_x[k], self.return_y[k]
-        self.refills_stamina[k] = True
+        self.return_pos[k] = (self.chain_x[k, 0] * TILE + radius, self.chain_y[k, 0] * TILE + radius)
+        self.pos[k] = self.return_pos[k]
+        step = opts["reward_step"]
+        self.reward_table[k, 0] = 0 + step  # index: 1 for a new tile + 2 for a fall-off
+        self.reward_table[k, 1] = (0 + opts["reward_path_progress"]) + step
+        self.reward_table[k, 2:] = (0 + opts["reward_fall_off"]) + step
         self.stamina_level[k] = self.stamina[k] = opts["stamina_level"]
         self.max_x[k] = 0
         self.tiles_visited[k] = 0
@@ -414,12 +464,8 @@ class MysteryPathCore(BatchedCore):
         self.camera_offset[k] = -TILE * opts["camera_offset_scale"]
         self.camera_x[k] = self.camera_offset[k]
         self.bg_scroll[k] = 0.0
-        self.depth[k] = int(opts["camera_offset_scale"])
         # The agent is always drawn at the same screen column: its start column minus the camera offset.
-        self.agent_screen_left[k] = int(self.return_x[k] - self.agent_half[k] - self.camera_offset[k])
-        self.show_past_path[k] = opts["show_past_path"]
-        self.show_background[k] = opts["show_background"]
-        self.show_stamina[k] = opts["show_stamina"]
+        self.agent_screen_left[k] = int(self.return_pos[k, 0] - self.half[k] - self.camera_offset[k])
 
     def _add_segment(self, k: int, rng: np.random.Generator) -> None:
         """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile."""
@@ -428,44 +474,63 @@ class MysteryPathCore(BatchedCore):
         goal_y = int(rng.integers(0, GRID))
         layout = generate_path(rng, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
         shift = segment * SEGMENT_COLUMNS
-        tiles = [(x + shift, y) for x, y in layout.path] + [(shift + GRID, goal_y)]
-        begin = int(self.chain_length[k])
-        end = begin + len(tiles)
+        xs, ys = self.chain_lists[k]
+        begin = len(xs)
+        xs += [x + shift for x, _ in layout.path] + [shift + GRID]
+        ys += [y for _, y in layout.path] + [goal_y]
+        end = len(xs)
         self._reserve(end, (segment + 2) * SEGMENT_COLUMNS)
-        xs = np.array([t[0] for t in tiles], dtype=np.int64)
-        ys = np.array([t[1] for t in tiles], dtype=np.int64)
-        self.chain_x[k, begin:end] = xs
-        self.chain_y[k, begin:end] = ys
-        # Direction from each tile to the next one (the new segment's last one gets its own when the next is added).
-        first = max(begin - 1, 0)
-        dx = np.diff(self.chain_x[k, first:end])
-        dy = np.diff(self.chain_y[k, first:end])
-        self.direction[k, first : end - 1] = np.select([dx == 1, dy == -1, dy == 1], [EAST, NORTH, SOUTH], WEST)
-        self.direction[k, end - 1] = WEST
-        self.unrewarded[k, begin:end] = True
-        self.refills_stamina[k, begin:end] = True
-        self.tile_node[k, xs, ys] = np.arange(begin, end)
-        self.chain_length[k] = end
+        self.chain_x[k, begin:end] = xs[begin:end]
+        self.chain_y[k, begin:end] = ys[begin:end]
+        first = max(begin - 1, 0)  # the previous segment's last tile gets its direction now
+        self.direction[k, first:end] = [
+            _direction(xs[i], ys[i], xs[i + 1], ys[i + 1]) for i in range(first, end - 1)
+        ] + [WEST]
+        self.flags[k, begin:end] = NEW_TILE | REFILL
+        self.tile_node[k, xs[begin:end], np.array(ys[begin:end]) + 1] = np.arange(begin, end)
+        self.segment_ends[k].append(end)
         self.num_segments[k] = segment + 1
         self.last_goal_y[k] = goal_y
+
+    def _enter_segment(self, k: int, segment: int) -> None:
+        """Prepare segment ``segment`` for an agent entering it: generate the next segment when this is the last one
+        (as the reference does), and compute where the past path starts for each of its tiles (not random, so it
+        is only done for segments that the agent reaches)."""
+        while segment > self.num_segments[k] - 2:
+            self._add_segment(k, self.rngs[k])
+        begin, end = int(self.walks_until[k]), self.segment_ends[k][segment]
+        if end > begin:
+            xs = self.chain_lists[k][0]
+            self.walk_start[k, begin:end] = [self._walk_start(k, i, xs[i] - 1) for i in range(begin, end)]
+            self.walks_until[k] = end
+        self.prepare_at[k] = (segment + 1) * SEGMENT_COLUMNS * TILE
+
+    def _walk_start(self, k: int, node: int, column: int) -> int:
+        """First chain tile of the past path drawn behind an agent in ``column + 1`` whose last path tile is ``node``.
+
+        The walk goes back from the tile before ``node`` and stops after the first tile whose column is at most
+        ``max(0, column - depth)``, or at the first tile of the path. Nothing is drawn when ``column < 0``.
+        """
+        if column < 0 or not self.show_past_path[k]:
+            return node
+        xs = self.chain_lists[k][0]
+        last = max(0, column - int(self.depth[k]))
+        i = node - 1
+        while i > 0 and xs[i] > last:
+            i -= 1
+        return max(i, 0)
 
     def _reserve(self, length: int, columns: int) -> None:
         """Grow the chain and tile arrays of all slots so that they hold ``length`` tiles and ``columns`` columns."""
         capacity = self.chain_x.shape[1]
         if length > capacity:
             extra = max(length, 2 * capacity) - capacity
-            for name, fill in (
-                ("chain_x", 0),
-                ("chain_y", 0),
-                ("direction", WEST),
-                ("unrewarded", False),
-                ("refills_stamina", False),
-            ):
+            for name, fill in (("chain_x", 0), ("chain_y", 0), ("direction", WEST), ("flags", 0), ("walk_start", 0)):
                 old = getattr(self, name)
                 setattr(self, name, np.concatenate([old, np.full((old.shape[0], extra), fill, old.dtype)], axis=1))
         if columns > self.tile_node.shape[1]:
             extra = max(columns, 2 * self.tile_node.shape[1]) - self.tile_node.shape[1]
-            pad = np.full((self.num_envs, extra, GRID), -1, dtype=np.int64)
+            pad = np.full((self.num_envs, extra, GRID + 2), -1, dtype=np.int64)
             self.tile_node = np.concatenate([self.tile_node, pad], axis=1)
 
     # -------------------------------------------------------------------------------------------- step
@@ -473,208 +538,303 @@ class MysteryPathCore(BatchedCore):
         return self.all_slots if isinstance(idx, slice) else idx
 
     def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        slots = self._slots_of(idx)
+        if len(slots) <= SCALAR_SLOTS:
+            # A numpy call costs microseconds whatever its size, so a few slots are stepped one by one with the
+            # same rules on the same state (tests check that both ways agree step for step).
+            actions = actions.reshape(len(slots), -1).tolist()
+            rewards = np.empty(len(slots), dtype=np.float64)
+            terminated = np.empty(len(slots), dtype=bool)
+            step_slot = self._step_endless_slot if self.endless else self._step_level_slot
+            for i, k in enumerate(slots.tolist()):
+                rewards[i], terminated[i] = step_slot(k, actions[i])
+                self._draw_slot(k)
+            return rewards, terminated
         if self.endless:
-            rewards, terminated = self._step_endless(idx, actions)
+            rewards, terminated = self._step_endless(idx, slots, actions.reshape(-1))
         else:
-            rewards, terminated = self._step_level(idx, actions)
+            rewards, terminated = self._step_level(idx, slots, actions)
         self._draw(idx)
         return rewards, terminated
 
-    def _move_free(self, idx: Index, moves: np.ndarray, back: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Free movement; slots in ``back`` are first put back on the path's first tile and do not move."""
-        moves = np.where(back[:, None], 0, moves)
-        vx, vy = continuous_velocity(moves, self.speed[idx])
-        self.heading[idx] = continuous_heading(moves, self.heading[idx])
-        x = np.where(back, self.return_x[idx], self.x[idx]) + vx.astype(np.int64)
-        y = np.where(back, self.return_y[idx], self.y[idx]) + vy.astype(np.int64)
-        return x, y
-
-    def _step_level(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        slots = self._slots_of(idx)
-        back = self.off_path[idx]
+    def _step_level_slot(self, k: int, action: list[int]) -> tuple[float, bool]:
+        """One Mystery Path step of slot ``k`` (the rules of :meth:`_step_level`, one slot at a time)."""
+        back = self.off_path[k]
         if self.grid:
-            moves = np.where(back, 0, actions.reshape(-1))
-            tx = np.where(back, self.return_x[idx], self.cell_x[idx])
-            ty = np.where(back, self.return_y[idx], self.cell_y[idx])
-            tx, ty, self.heading[idx] = grid_step(moves, tx, ty, self.heading[idx], GRID)
-            self.cell_x[idx], self.cell_y[idx] = tx, ty
-            x, y = tx * TILE + TILE // 2, ty * TILE + TILE // 2
+            state = int(self.grid_state[k])
+            state = int(self.origin_state[k]) | (state & 3) if back else int(GRID_NEXT[state, action[0]])
+            self.grid_state[k] = state
+            self.heading[k] = (state & 3) * 90
+            tile = state >> 2
+            self.pos[k] = TILE_CENTRES[tile]
         else:
-            x, y = self._move_free(idx, actions.reshape(-1, 2), back)
-            radius = self.radius[idx]
-            x = clamp_centre(x, radius, SCREEN - radius)
-            y = clamp_centre(y, radius, SCREEN - radius)
-            tx, ty = x // TILE, y // TILE
-        self.x[idx], self.y[idx] = x, y
-        goal = (tx == self.goal_x[idx]) & (ty == self.goal_y[idx])
-        on_path = self.on_path[slots, tx, ty]
-        progress = self.unrewarded[slots, tx, ty]  # never the origin or the goal
-        self.unrewarded[slots, tx, ty] = False
-        fell = ~(goal | on_path)
-        rewards = np.where(
-            goal,
-            self.reward_goal[idx],
-            np.where(progress, self.reward_path_progress[idx], np.where(fell, self.reward_fall_off[idx], 0.0)),
-        )
-        rewards = rewards + self.reward_step[idx]
+            code = 0 if back else action[0] * 3 + action[1]
+            x, y = (self.return_pos if back else self.pos)[k].tolist()
+            vx, vy = self.velocity[k, code].tolist()
+            low, high = int(self.pos_low[k, 0]), int(self.pos_high[k, 0])
+            x, y = max(min(x + vx, high), low), max(min(y + vy, high), low)
+            self.pos[k] = x, y
+            turn = FREE_HEADINGS[code]
+            if turn >= 0:
+                self.heading[k] = turn
+            tile = (x // TILE) * GRID + y // TILE
+        status = int(self.status[k, tile])
+        self.status[k, tile] = AFTER_VISIT[status]
+        fell, goal = status == OFF, status == GOAL
+        self.num_fails[k] += fell
+        self.off_path[k] = fell
+        self.cross_visible[k] = fell and self.visual_feedback[k]
+        self.success[k] = goal
+        self.t[k] += 1
+        return self.reward_table[k, status], goal or self.t[k] == self.max_steps[k]
+
+    def _step_endless_slot(self, k: int, action: list[int]) -> tuple[float, bool]:
+        """One Endless Mystery Path step of slot ``k`` (the rules of :meth:`_step_endless`, one slot at a time)."""
+        if self.off_path[k]:
+            x, y = self.return_pos[k].tolist()
+            self.camera_x[k] = self.camera_offset[k]
+            self.bg_scroll[k] = 0.0
+        else:
+            vx, vy = self.velocity[k, action[0]].tolist()
+            x, y = self.pos[k].tolist()
+            x, y = x + vx, y + vy
+            turn = ENDLESS_HEADINGS[action[0]]
+            if turn >= 0:
+                self.heading[k] = turn
+            self.camera_x[k] += vx
+            scroll = self.bg_scroll[k] - vx
+            if abs(scroll) >= TILE:
+                scroll = abs(scroll) % abs(vx) * np.sign(scroll)
+            self.bg_scroll[k] = scroll
+        self.pos[k] = x, y
+        tx, ty = x // TILE, y // TILE
+        if x >= self.prepare_at[k]:
+            self._enter_segment(k, tx // SEGMENT_COLUMNS)
+        node = int(self.tile_node[k, tx, min(max(ty, -1), GRID) + 1])
+        on_path = node >= 0
+        if on_path:
+            self.current_node[k] = node
+        else:
+            node = int(self.current_node[k])
+        flags = int(self.flags[k, node])
+        if on_path:
+            self.flags[k, node] = 0  # a visited tile pays and refills only once
+        new_tile = flags & NEW_TILE
+        reward = self.reward_table[k, new_tile + 2 * (not on_path)]
+        self.tiles_visited[k] += new_tile
+        stamina = (self.stamina_level[k] if flags >= REFILL or not on_path else self.stamina[k]) - 1
+        self.stamina[k] = stamina
+        self.t[k] += 1
+        terminated = stamina == 0 or self.t[k] == self.max_steps[k]
+        self.draw_from[k] = self.walk_start[k, node]
+        if not on_path:
+            terminated = self._fall_off(k, tx, ty, node) or terminated
+        self.off_path[k] = not on_path
+        self.cross_visible[k] = not on_path and self.visual_feedback[k]
+        direction = self.direction[k, node]
+        if direction != WEST:
+            self.ground_truth[k] = direction
+        if on_path and tx > self.max_x[k]:
+            self.max_x[k] = tx
+        return reward, bool(terminated)
+
+    def _fall_off(self, k: int, column: int, row: int, node: int) -> bool:
+        """Endless fall-off bookkeeping of slot ``k`` at tile (column, row); True if it ends the episode.
+
+        Falling off behind the best column, or twice at the same tile, ends the episode. (The tiles are meant to be
+        forgotten on reaching a new best column, but the reference never does.) Every tile refills stamina again.
+        """
+        self.num_fails[k] += 1
+        tile, seen = (column, row), self.fall_off_tiles[k]
+        ends = column < self.max_x[k] or tile in seen
+        if not ends:
+            seen.add(tile)
+        self.flags[k, : len(self.chain_lists[k][0])] |= REFILL
+        self.draw_from[k] = self._walk_start(k, node, column - 1)
+        return ends
+
+    def _step_level(self, idx: Index, slots: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        back = self.off_path[idx]  # fell off last step: back to the origin, the action is ignored
+        if self.grid:
+            state = self.grid_state[idx]
+            moved = GRID_NEXT[state, actions.reshape(-1)]
+            state = np.where(back, self.origin_state[idx] | (state & 3), moved)
+            self.grid_state[idx] = state
+            self.heading[idx] = (state & 3) * 90
+            tile = state >> 2
+            self.pos[idx] = TILE_CENTRES[tile]
+        else:
+            actions = actions.reshape(-1, 2)
+            code = np.where(back, 0, actions[:, 0] * 3 + actions[:, 1])
+            pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
+            pos += self.velocity[slots, code]
+            np.minimum(pos, self.pos_high[idx], out=pos)  # the upper bound first, as in the reference
+            np.maximum(pos, self.pos_low[idx], out=pos)
+            self.pos[idx] = pos
+            turn = FREE_HEADINGS[code]
+            self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
+            tile = TILE_OF_PIXEL[pos[:, 0], pos[:, 1]]
+        status = self.status[slots, tile]
+        self.status[slots, tile] = AFTER_VISIT[status]
+        rewards = self.reward_table[slots, status]
+        fell = status == OFF
+        goal = status == GOAL
         self.num_fails[idx] += fell
         self.off_path[idx] = fell
         self.cross_visible[idx] = fell & self.visual_feedback[idx]
-        self.cross_x[idx], self.cross_y[idx] = x, y
         self.success[idx] = goal
-        t = self.t[idx] + 1
-        self.t[idx] = t
-        return rewards, goal | (t == self.max_steps[idx])
+        self.t[idx] += 1
+        return rewards, goal | (self.t[idx] == self.max_steps[idx])
 
-    def _step_endless(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        slots = self._slots_of(idx)
-        back = self.off_path[idx]
-        x, y = self._move_free(idx, ENDLESS_ACTIONS[actions.reshape(-1)], back)
-        vx = np.where(back, 0, x - self.x[idx])
-        self.x[idx], self.y[idx] = x, y
+    def _step_endless(self, idx: Index, slots: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        back = self.off_path[idx]  # fell off last step: back to the first tile, camera reset, action ignored
+        code = np.where(back, 0, actions)
+        velocity = self.velocity[slots, code]
+        pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
+        pos += velocity
+        self.pos[idx] = pos
+        turn = ENDLESS_HEADINGS[code]
+        self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
         # The camera follows the agent horizontally; the background scrolls the other way and wraps.
+        vx = velocity[:, 0]
         self.camera_x[idx] = np.where(back, self.camera_offset[idx], self.camera_x[idx] + vx)
         scroll = np.where(back, 0.0, self.bg_scroll[idx] - vx)
         wrap = np.abs(scroll) >= TILE
         if wrap.any():
-            step = np.where(vx != 0, np.abs(vx), 1)
-            scroll = np.where(wrap, np.abs(scroll) % step * np.sign(scroll), scroll)
+            scroll = np.where(wrap, np.abs(scroll) % np.where(vx != 0, np.abs(vx), 1) * np.sign(scroll), scroll)
         self.bg_scroll[idx] = scroll
 
-        tx, ty = x // TILE, y // TILE
-        segment = tx // SEGMENT_COLUMNS
-        ahead = segment > self.num_segments[idx] - 2
-        while ahead.any():  # one new segment when the agent enters the last one (more only at absurd speeds)
-            for k in slots[ahead]:
-                self._add_segment(int(k), self.rngs[int(k)])
-            ahead = segment > self.num_segments[idx] - 2
-        inside = (ty >= 0) & (ty < GRID)
-        node = np.where(inside, self.tile_node[slots, tx, np.clip(ty, 0, GRID - 1)], -1)
+        px = pos[:, 0]
+        tx = px // TILE
+        ahead = px >= self.prepare_at[idx]
+        if ahead.any():
+            for k, column in zip(slots[ahead].tolist(), tx[ahead].tolist(), strict=True):
+                self._enter_segment(k, column // SEGMENT_COLUMNS)
+        ty = pos[:, 1] // TILE
+        node = self.tile_node[slots, tx, np.minimum(np.maximum(ty, -1), GRID) + 1]
         on_path = node >= 0
+        fell = ~on_path
         node = np.where(on_path, node, self.current_node[idx])
         self.current_node[idx] = node
-        progress = on_path & self.unrewarded[slots, node]
-        self.unrewarded[slots, node] &= ~progress
-        self.tiles_visited[idx] += progress
-        refill = on_path & self.refills_stamina[slots, node]
-        self.refills_stamina[slots, node] &= ~refill
-        stamina = np.where(refill, self.stamina_level[idx], self.stamina[idx])
-        fell = ~on_path
-        rewards = np.where(progress, self.reward_path_progress[idx], 0.0)
-        terminated = np.zeros(len(rewards), dtype=bool)
-        if fell.any():
-            rewards = rewards + np.where(fell, self.reward_fall_off[idx], 0.0)
-            self.num_fails[idx] += fell
-            # Falling off behind the best column, or twice at the same tile, ends the episode. (The fall-off tiles
-            # are meant to be forgotten on reaching a new best column, but the reference never does.)
-            max_x = self.max_x[idx]
-            for i in np.flatnonzero(fell):
-                tile = (int(tx[i]), int(ty[i]))
-                seen = self.fall_off_tiles[int(slots[i])]
-                if tile[0] < max_x[i] or tile in seen:
-                    terminated[i] = True
-                else:
-                    seen.add(tile)
-            fell_slots = slots[fell]
-            self.refills_stamina[fell_slots] = True
-            stamina = np.where(fell, self.stamina_level[idx], stamina)
-        rewards = rewards + self.reward_step[idx]
+        flags = self.flags[slots, node]
+        self.flags[slots, node] = np.where(on_path, 0, flags)  # a visited tile pays and refills only once
+        new_tile = flags & NEW_TILE
+        rewards = self.reward_table[slots, new_tile + 2 * fell]
+        self.tiles_visited[idx] += new_tile
+        stamina = np.where((flags >= REFILL) | fell, self.stamina_level[idx], self.stamina[idx]) - 1
+        self.stamina[idx] = stamina
+        self.t[idx] += 1
+        terminated = (stamina == 0) | (self.t[idx] == self.max_steps[idx])
+        self.draw_from[idx] = self.walk_start[slots, node]
+        for i in np.flatnonzero(fell).tolist():
+            terminated[i] |= self._fall_off(int(slots[i]), int(tx[i]), int(ty[i]), int(node[i]))
         self.off_path[idx] = fell
         self.cross_visible[idx] = fell & self.visual_feedback[idx]
-        self.cross_x[idx] = round_half_away(x - self.camera_x[idx])
-        self.cross_y[idx] = y
-        stamina = stamina - 1
-        self.stamina[idx] = stamina
-        t = self.t[idx] + 1
-        self.t[idx] = t
-        terminated |= (stamina == 0) | (t == self.max_steps[idx])
         direction = self.direction[slots, node]
         self.ground_truth[idx] = np.where(direction == WEST, self.ground_truth[idx], direction)
-        self.max_x[idx] = np.where(on_path & (tx > self.max_x[idx]), tx, self.max_x[idx])
+        self.max_x[idx] = np.maximum(self.max_x[idx], tx * on_path)
         return rewards, terminated
 
     # ------------------------------------------------------------------------------------------- drawing
+    def _draw_slot(self, k: int) -> None:
+        """Draw the agent view of slot ``k`` (the picture of :meth:`_draw`, one slot at a time)."""
+        frame = self.canvas.view[k]
+        x, y = self.pos[k].tolist()
+        half = int(self.half[k])
+        if self.endless:
+            self._draw_floor_slot(k, frame)
+            left = int(self.agent_screen_left[k])
+        else:
+            frame[:] = self.background[k]
+            left = x - half
+        self.agents.sprites[int(self.sprite0[k]) + int(self.heading[k]) // 45].paste(frame, y - half, left)
+        if self.endless and self.show_stamina[k]:
+            frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
+        if self.cross_visible[k]:
+            cross = self.crosses.sprites[self.cross_id]
+            centre_x, centre_y = self._cross_centres(k)
+            cross.paste(frame, int(centre_y) - cross.height // 2, int(centre_x) - cross.width // 2)
+
+    def _draw_floor_slot(self, k: int, frame: np.ndarray) -> None:
+        """The endless floor of slot ``k``: black or ice, then the path tiles behind the agent."""
+        if self.show_background[k]:
+            frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
+        else:
+            frame[:] = 0
+        first, stop = int(self.draw_from[k]), int(self.current_node[k])
+        if stop > first:
+            camera = float(self.camera_x[k])
+            xs, ys = self.chain_lists[k]
+            for tx, ty in zip(xs[first:stop], ys[first:stop], strict=True):
+                left = int(tx * TILE - camera)  # pygame cuts float rects toward zero
+                c0, c1 = max(left, 0), min(left + TILE, SCREEN)
+                if c0 < c1:
+                    frame[ty * TILE : (ty + 1) * TILE, c0:c1] = PATH_TILE[:, c0 - left : c1 - left]
+
     def _draw(self, idx: Index) -> None:
         slots = self._slots_of(idx)
+        pos = self.pos[idx]
+        top = pos[:, 1] - self.half[idx]
         if self.endless:
-            self._draw_endless_floor(idx, slots)
-            top = self.y[idx] - self.agent_half[idx]
+            self._draw_floor(idx, slots)
             left = self.agent_screen_left[idx]
         else:
             self.canvas.view[idx] = self.background[idx]
-            top = self.y[idx] - self.agent_half[idx]
-            left = self.x[idx] - self.agent_half[idx]
-        sprite = self.agent_sprite0[idx] + self.heading[idx] // 45
-        self.canvas.paste(self.agents, slots, sprite, top, left)
+            left = pos[:, 0] - self.half[idx]
+        sprite = self.sprite0[idx] + self.heading[idx] // 45
+        self.canvas.paste(self.agents, slots, sprite, top, left, may_leave_screen=self.endless)
         if self.endless:
             bar = self.show_stamina[idx]
             if bar.any():
                 with_bar = slots[bar]
-                self.canvas.view[with_bar, :, SCREEN - STAMINA_BAR_WIDTH :] = _stamina_bars()[
-                    self._stamina_bar_heights(with_bar)
-                ]
+                heights = self._stamina_bar_heights(with_bar)
+                self.canvas.view[with_bar, :, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[heights]
         cross = self.cross_visible[idx]
         if cross.any():
             with_cross = slots[cross]
-            half = self.crosses.sprites[self.cross_id].width // 2
+            centre_x, centre_y = self._cross_centres(with_cross)
+            half = self.crosses.widths[self.cross_id] // 2
             ids = np.full(len(with_cross), self.cross_id)
-            self.canvas.paste(
-                self.crosses, with_cross, ids, self.cross_y[with_cross] - half, self.cross_x[with_cross] - half
-            )
+            self.canvas.paste(self.crosses, with_cross, ids, centre_y - half, centre_x - half, self.endless)
 
-    def _stamina_bar_heights(self, slots: np.ndarray) -> np.ndarray:
+    def _cross_centres(self, slots: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
+        """Screen centre of the fall-off cross: the agent's centre (rounded after the endless camera shift)."""
+        x, y = self.pos[slots, 0], self.pos[slots, 1]
+        if self.endless:
+            return round_half_away(x - self.camera_x[slots]), y
+        return x, y
+
+    def _stamina_bar_heights(self, slots: np.ndarray | int) -> np.ndarray:
         level = self.stamina_level[slots]
         return (SCREEN * (1 - np.minimum(self.stamina[slots], level) / level)).astype(np.int64)
 
-    def _past_path_tiles(self, idx: Index, slots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The path tiles drawn behind the agent: (slot row in ``slots``, tile row, screen x of the tile's left).
-
-        Walking back from the tile before the current one, the walk stops after the first tile whose column is at
-        most ``max(0, agent column - 1 - depth)`` (or at the path's first tile); nothing is drawn in column 0.
-        """
-        column = self.x[idx] // TILE - 1
-        active = self.show_past_path[idx] & (column >= 0)
-        last = np.maximum(column - self.depth[idx], 0)
-        before = self.current_node[idx] - 1  # chain index of the first tile drawn
-        window = 32
-        while True:
-            chain = before[:, None] - np.arange(window)
-            valid = chain >= 0
-            chain = np.maximum(chain, 0)
-            xs = self.chain_x[slots[:, None], chain]
-            stop = valid & ((xs <= last[:, None]) | (chain == 0))
-            found = stop.any(axis=1) | ~valid[:, -1]
-            if found[active].all():
-                break
-            window *= 2
-        drawn = valid & (np.arange(window) <= np.argmax(stop, axis=1)[:, None]) & active[:, None]
-        rows, cols = np.nonzero(drawn)
-        chain = chain[rows, cols]
-        ys = self.chain_y[slots[rows], chain]
-        left = np.trunc(xs[rows, cols] * TILE - self.camera_x[idx][rows]).astype(np.int64)
-        return rows, ys, left
-
-    def _draw_endless_floor(self, idx: Index, slots: np.ndarray) -> None:
-        """Background (black or ice) and the past path, written band by band."""
+    def _draw_floor(self, idx: Index, slots: np.ndarray) -> None:
+        """The endless floor (black or scrolling ice) and the path tiles behind the agent, band by band."""
         m = len(slots)
-        phase = np.where(self.show_background[idx], (-self.bg_scroll[idx]).astype(np.int64) % TILE, _BLACK_BACKGROUND)
-        width = SCREEN + 2 * BAND_PAD
-        kinds = np.empty((m, GRID, width), dtype=np.int8)
-        kinds[:, :, BAND_PAD : BAND_PAD + SCREEN] = _BACKGROUND_KINDS[phase][:, None, :]
-        rows, ys, left = self._past_path_tiles(idx, slots)
-        if len(rows):
-            left = np.clip(left, -BAND_PAD, SCREEN) + BAND_PAD
-            start = (rows * GRID + ys) * width + left
-            kinds.reshape(-1)[start[:, None] + np.arange(TILE)] = TILE_KINDS
-        kinds = kinds[:, :, BAND_PAD : BAND_PAD + SCREEN]
-        edge, middle = EDGE_ROW[kinds], MIDDLE_ROW[kinds]
-        if isinstance(idx, slice):
-            bands = self.canvas.bands
-        else:
-            bands = np.empty((m, GRID, TILE, SCREEN, 3), dtype=np.uint8)
-        bands[:, :, 0] = edge
-        bands[:, :, TILE - 1] = edge
-        bands[:, :, 1 : TILE - 1] = middle[:, :, None]
+        phase = np.where(self.show_background[idx], (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
+        edge = np.empty((m, GRID, BAND_WIDTH, 3), dtype=np.uint8)
+        middle = np.empty((m, GRID, BAND_WIDTH, 3), dtype=np.uint8)
+        edge[:, :, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_EDGE[phase][:, None]
+        middle[:, :, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_MIDDLE[phase][:, None]
+        first = self.draw_from[idx]
+        count = self.current_node[idx] - first
+        most = int(count.max())
+        if most > 0:
+            rows, cols = np.nonzero(np.arange(most) < count[:, None])
+            owner = slots[rows]
+            chain = first[rows] + cols
+            # Each tile's screen column is truncated on its own (pygame cuts float rects toward zero).
+            left = np.trunc(self.chain_x[owner, chain] * TILE - self.camera_x[owner]).astype(np.int64)
+            left = np.minimum(np.maximum(left, -BAND_PAD), SCREEN) + BAND_PAD
+            start = ((rows * GRID + self.chain_y[owner, chain]) * BAND_WIDTH + left) * 3
+            at = start[:, None] + TILE_BYTE_OFFSETS
+            edge.reshape(-1)[at] = TILE_EDGE_BYTES
+            middle.reshape(-1)[at] = TILE_MIDDLE_BYTES
+        bands = self.canvas.bands if isinstance(idx, slice) else np.empty((m, GRID, TILE, SCREEN, 3), np.uint8)
+        visible = slice(BAND_PAD, BAND_PAD + SCREEN)
+        bands[:, :, 0] = edge[:, :, visible]
+        bands[:, :, TILE - 1] = edge[:, :, visible]
+        bands[:, :, 1 : TILE - 1] = middle[:, :, None, visible]
         if not isinstance(idx, slice):
             self.canvas.view[idx] = bands.reshape(m, SCREEN, SCREEN, 3)
 
@@ -700,17 +860,18 @@ class MysteryPathCore(BatchedCore):
         """Ground truth: the whole level (path white, origin blue, goal green, walls red) or, in the endless
         variant, every generated path tile at alpha 200 and the stamina bar; plus the agent and the cross."""
         frame = np.zeros((SCREEN, SCREEN, 3), dtype=np.uint8)
+        x, y = (int(v) for v in self.pos[k])
         if self.endless:
             if self.show_background[k]:
                 frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
             shift = int(-self.camera_x[k])  # the whole path picture is placed once, so it is truncated once
-            length = int(self.chain_length[k])
-            for tx, ty in zip(self.chain_x[k, :length].tolist(), self.chain_y[k, :length].tolist(), strict=True):
+            xs, ys = self.chain_lists[k]
+            for tx, ty in zip(xs, ys, strict=True):
                 left = tx * TILE + shift
                 if -TILE < left < SCREEN:
                     area = frame[ty * TILE : (ty + 1) * TILE, max(left, 0) : left + TILE]
                     area[:] = blend(area, np.array(PATH_COLOUR), DEBUG_PATH_ALPHA)
-            top, left = int(self.y[k] - self.agent_half[k]), int(self.agent_screen_left[k])
+            left = int(self.agent_screen_left[k])
         else:
             origin, goal, layout = self.levels[k]
             for tile in layout.path[1:-1]:
@@ -719,14 +880,22 @@ class MysteryPathCore(BatchedCore):
             _fill_tile(frame, goal, GOAL_COLOUR)
             for tile in layout.walls:
                 _fill_tile(frame, tile, WALL_COLOUR)
-            top, left = int(self.y[k] - self.agent_half[k]), int(self.x[k] - self.agent_half[k])
-        self.agents.sprites[int(self.agent_sprite0[k] + self.heading[k] // 45)].paste(frame, top, left)
+            left = x - int(self.half[k])
+        self.agents.sprites[int(self.sprite0[k] + self.heading[k] // 45)].paste(frame, y - int(self.half[k]), left)
         if self.cross_visible[k]:
             cross = self.crosses.sprites[self.cross_id]
-            cross.paste(frame, int(self.cross_y[k]) - cross.height // 2, int(self.cross_x[k]) - cross.width // 2)
+            centre_x, centre_y = self._cross_centres(k)
+            cross.paste(frame, int(centre_y) - cross.height // 2, int(centre_x) - cross.width // 2)
         if self.endless:
-            frame[:, SCREEN - STAMINA_BAR_WIDTH :] = _stamina_bars()[self._stamina_bar_heights(np.array([k]))[0]]
+            frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
         return frame
+
+
+def _direction(x0: int, y0: int, x1: int, y1: int) -> int:
+    """Ground-truth direction of a step along the path (west has no code)."""
+    if x1 - x0 == 1:
+        return EAST
+    return NORTH if y1 - y0 == -1 else (SOUTH if y1 - y0 == 1 else WEST)
 
 
 def _fill_tile(frame: np.ndarray, tile: tuple[int, int], colour: tuple[int, int, int]) -> None:
