@@ -376,9 +376,7 @@ class MysteryPathCore(BatchedCore):
         self.half[k] = self.agents.sprites[first].width // 2
         radius = int(25 * scale)
         if not self.grid:
-            actions = ENDLESS_ACTIONS if self.endless else FREE_ACTIONS
-            vx, vy = continuous_velocity(actions, np.full(len(actions), float(opts["agent_speed"])))
-            self.velocity[k] = np.stack([vx, vy], axis=1).astype(np.int64)
+            self.velocity[k] = _velocities(self.endless, float(opts["agent_speed"]))
         self.t[k] = 0
         self.max_steps[k] = opts["max_steps"]
         self.num_fails[k] = 0
@@ -480,14 +478,15 @@ class MysteryPathCore(BatchedCore):
         ys += [y for _, y in layout.path] + [goal_y]
         end = len(xs)
         self._reserve(end, (segment + 2) * SEGMENT_COLUMNS)
-        self.chain_x[k, begin:end] = xs[begin:end]
-        self.chain_y[k, begin:end] = ys[begin:end]
+        tiles = np.array([xs[begin:end], ys[begin:end]])
+        self.chain_x[k, begin:end] = tiles[0]
+        self.chain_y[k, begin:end] = tiles[1]
         first = max(begin - 1, 0)  # the previous segment's last tile gets its direction now
-        self.direction[k, first:end] = [
-            _direction(xs[i], ys[i], xs[i + 1], ys[i + 1]) for i in range(first, end - 1)
-        ] + [WEST]
+        directions = [_direction(xs[i], ys[i], xs[i + 1], ys[i + 1]) for i in range(first, end - 1)]
+        self.direction[k, first : end - 1] = directions
+        self.direction[k, end - 1] = WEST  # until the next segment is added
         self.flags[k, begin:end] = NEW_TILE | REFILL
-        self.tile_node[k, xs[begin:end], np.array(ys[begin:end]) + 1] = np.arange(begin, end)
+        self.tile_node[k, tiles[0], tiles[1] + 1] = range(begin, end)
         self.segment_ends[k].append(end)
         self.num_segments[k] = segment + 1
         self.last_goal_y[k] = goal_y
@@ -889,6 +888,14 @@ class MysteryPathCore(BatchedCore):
         if self.endless:
             frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
         return frame
+
+
+@cache
+def _velocities(endless: bool, speed: float) -> np.ndarray:
+    """(vx, vy) of each action code of the free controller at ``speed`` px per step."""
+    actions = ENDLESS_ACTIONS if endless else FREE_ACTIONS
+    vx, vy = continuous_velocity(actions, np.full(len(actions), speed))
+    return np.stack([vx, vy], axis=1).astype(np.int64)
 
 
 def _direction(x0: int, y0: int, x1: int, y1: int) -> int:
