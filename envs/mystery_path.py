@@ -346,6 +346,8 @@ class MysteryPathCore(BatchedCore):
         # tile_node[slot, x, y + 1]: chain index of a path tile or -1; rows 0 and 8 catch agents above and below.
         self.tile_node = np.full((n, (INITIAL_SEGMENTS + 1) * SEGMENT_COLUMNS, GRID + 2), -1, dtype=np.int64)
         self.num_segments = np.zeros(n, dtype=np.int64)
+        self.reference_segments = np.zeros(n, dtype=np.int64)  # segments the reference has built by now
+        self.segment_rng: list[np.random.Generator | None] = [None] * n  # the generator that builds them
         self.segment_ends: list[list[int]] = [[] for _ in range(n)]  # chain length after each segment
         self.walks_until = np.zeros(n, dtype=np.int64)  # walk_start is known for the chain tiles before this
         self.prepare_at = np.zeros(n, dtype=np.int64)  # x pixel of the next segment (see _enter_segment)
@@ -436,13 +438,16 @@ class MysteryPathCore(BatchedCore):
         self.show_past_path[k] = opts["show_past_path"]
         self.show_background[k] = opts["show_background"]
         self.show_stamina[k] = opts["show_stamina"]
+        if self.segment_rng[k] is rng:  # the generator continues: first make the last episode's remaining draws
+            self._catch_up(k)
+        self.segment_rng[k] = rng
         self.chain_lists[k] = ([], [])
         self.segment_ends[k] = []
         self.num_segments[k] = 0
+        self.reference_segments[k] = INITIAL_SEGMENTS
         self.walks_until[k] = 0
         self.tile_node[k] = -1
-        for _ in range(INITIAL_SEGMENTS):
-            self._add_segment(k, rng)
+        self._add_segment(k, rng)
         self._enter_segment(k, 0)
         self.flags[k, 0] &= ~NEW_TILE  # the very first tile pays nothing
         self.current_node[k] = 0
@@ -484,7 +489,7 @@ class MysteryPathCore(BatchedCore):
         first = max(begin - 1, 0)  # the previous segment's last tile gets its direction now
         directions = [_direction(xs[i], ys[i], xs[i + 1], ys[i + 1]) for i in range(first, end - 1)]
         self.direction[k, first : end - 1] = directions
-        self.direction[k, end - 1] = WEST  # until the next segment is added
+        self.direction[k, end - 1] = EAST  # the next segment starts right of the transition tile
         self.flags[k, begin:end] = NEW_TILE | REFILL
         self.tile_node[k, tiles[0], tiles[1] + 1] = range(begin, end)
         self.segment_ends[k].append(end)
@@ -492,17 +497,35 @@ class MysteryPathCore(BatchedCore):
         self.last_goal_y[k] = goal_y
 
     def _enter_segment(self, k: int, segment: int) -> None:
-        """Prepare segment ``segment`` for an agent entering it: generate the next segment when this is the last one
-        (as the reference does), and compute where the past path starts for each of its tiles (not random, so it
-        is only done for segments that the agent reaches)."""
-        while segment > self.num_segments[k] - 2:
-            self._add_segment(k, self.rngs[k])
+        """Prepare segment ``segment`` for an agent entering it, and compute where the past path starts for each of
+        its tiles (not random, so it is only done for segments that the agent reaches).
+
+        The reference builds three segments at reset and one more whenever the agent enters the last one. Here only
+        the first is built at reset; entering the second builds every segment that the reference has built by then,
+        in the same order from the same generator, so levels and random streams are the same. An episode that never
+        leaves the first segment (most short ones) then costs one level instead of three, unless the next reset
+        continues the generator: then :meth:`_catch_up` makes the missing draws first.
+        """
+        while segment > self.reference_segments[k] - 2:
+            self.reference_segments[k] += 1
+        if segment > 0:
+            self._catch_up(k)
         begin, end = int(self.walks_until[k]), self.segment_ends[k][segment]
         if end > begin:
             xs = self.chain_lists[k][0]
             self.walk_start[k, begin:end] = [self._walk_start(k, i, xs[i] - 1) for i in range(begin, end)]
             self.walks_until[k] = end
         self.prepare_at[k] = (segment + 1) * SEGMENT_COLUMNS * TILE
+
+    def _catch_up(self, k: int) -> None:
+        """Build the segments that the reference has built by now but this slot has not yet (see _enter_segment)."""
+        while self.num_segments[k] < self.reference_segments[k]:
+            self._add_segment(k, self.segment_rng[k])
+
+    def path_tiles(self, k: int) -> tuple[list[int], list[int]]:
+        """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""
+        self._catch_up(k)
+        return self.chain_lists[k]
 
     def _walk_start(self, k: int, node: int, column: int) -> int:
         """First chain tile of the past path drawn behind an agent in ``column + 1`` whose last path tile is ``node``.
@@ -864,7 +887,7 @@ class MysteryPathCore(BatchedCore):
             if self.show_background[k]:
                 frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
             shift = int(-self.camera_x[k])  # the whole path picture is placed once, so it is truncated once
-            xs, ys = self.chain_lists[k]
+            xs, ys = self.path_tiles(k)
             for tx, ty in zip(xs, ys, strict=True):
                 left = tx * TILE + shift
                 if -TILE < left < SCREEN:

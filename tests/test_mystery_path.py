@@ -202,6 +202,12 @@ def endless_action_towards(core: MysteryPathCore, tile: tuple[int, int]) -> int:
     return 1 if cx > x else 0
 
 
+def next_path_tile(core: MysteryPathCore) -> tuple[int, int]:
+    xs, ys = core.path_tiles(0)
+    node = int(core.current_node[0])
+    return xs[node + 1], ys[node + 1]
+
+
 def walk_endless_to_column(env: gym.Env, column: int) -> None:
     """Follow the endless path until the agent stands on a path tile in ``column`` or beyond."""
     core = core_of(env)
@@ -209,8 +215,7 @@ def walk_endless_to_column(env: gym.Env, column: int) -> None:
         node = int(core.current_node[0])
         if core.chain_x[0, node] >= column and agent_tile(core) == (core.chain_x[0, node], core.chain_y[0, node]):
             return
-        nxt = (int(core.chain_x[0, node + 1]), int(core.chain_y[0, node + 1]))
-        *_, terminated, _, _ = env.step(endless_action_towards(core, nxt))
+        *_, terminated, _, _ = env.step(endless_action_towards(core, next_path_tile(core)))
         assert not terminated and not core.off_path[0]
     raise AssertionError("did not get there")
 
@@ -261,8 +266,7 @@ def _fall_off_vertically(env: gym.Env) -> tuple[tuple[int, int], float, bool]:
     """Move up or down from the current path tile until the agent leaves the path; (tile, reward, terminated)."""
     core = core_of(env)
     tx, ty = agent_tile(core)
-    xs, ys = core.chain_lists[0]
-    on_path = set(zip(xs, ys, strict=True))
+    on_path = set(zip(*core.path_tiles(0), strict=True))
     action = 2 if (tx, ty - 1) not in on_path else 3
     assert (tx, ty + (-1 if action == 2 else 1)) not in on_path, "both vertical neighbours are on the path"
     for _ in range(12):
@@ -291,7 +295,7 @@ def test_endless_falling_off_behind_the_best_column_ends_the_episode() -> None:
         core = core_of(env)
         walk_endless_to_column(env, 3)
         tx, ty = agent_tile(core)
-        on_path = set(zip(*core.chain_lists[0], strict=True))
+        on_path = set(zip(*core.path_tiles(0), strict=True))
         if {(tx, ty - 1), (tx, ty + 1)} <= on_path or {(0, core.chain_y[0, 0] - 1), (0, core.chain_y[0, 0] + 1)} <= (
             on_path
         ):
@@ -311,15 +315,16 @@ def test_endless_ground_truth_points_to_the_next_path_tile() -> None:
     env = make("Endless-MysteryPath-v0")
     _, info = env.reset(seed=9)
     core = core_of(env)
-    for _ in range(60):
+    columns = set()
+    for _ in range(90):
         node = int(core.current_node[0])
-        dx = core.chain_x[0, node + 1] - core.chain_x[0, node]
-        dy = core.chain_y[0, node + 1] - core.chain_y[0, node]
-        if dx != -1:  # a westward step keeps the previous value (quirk)
-            expected = {(1, 0): [1, 0, 0], (0, -1): [0, 1, 0], (0, 1): [0, 0, 1]}[(int(dx), int(dy))]
+        (x0, y0), (x1, y1) = (int(core.chain_x[0, node]), int(core.chain_y[0, node])), next_path_tile(core)
+        if x1 - x0 != -1:  # a westward step keeps the previous value (quirk)
+            expected = {(1, 0): [1, 0, 0], (0, -1): [0, 1, 0], (0, 1): [0, 0, 1]}[(x1 - x0, y1 - y0)]
             assert info["ground_truth"].tolist() == expected
-        nxt = (int(core.chain_x[0, node + 1]), int(core.chain_y[0, node + 1]))
-        *_, info = env.step(endless_action_towards(core, nxt))
+        columns.add(x0)
+        *_, info = env.step(endless_action_towards(core, (x1, y1)))
+    assert 7 in columns  # the transition tile to the second segment was passed
 
 
 def test_endless_past_path_is_drawn_behind_the_agent_only() -> None:
@@ -430,9 +435,8 @@ def _actions(space: gym.Space, rng: np.random.Generator, cores: list[MysteryPath
     actions = rng.integers(0, space.n, size=n)
     if cores[0].endless:
         for k, core in enumerate(cores):
-            node = int(core.current_node[0])
             if rng.random() < 0.9 and not core.off_path[0]:
-                actions[k] = endless_action_towards(core, (core.chain_x[0, node + 1], core.chain_y[0, node + 1]))
+                actions[k] = endless_action_towards(core, next_path_tile(core))
     return actions
 
 
@@ -521,3 +525,38 @@ def test_reference_traces_replayed_in_one_batch(env_id: str) -> None:
             assert values_equal(jsonable(info), ep["infos"][t]), (ep["name"], t)
             checked += 1
     assert checked == sum(len(ep["actions"]) for ep in episodes)
+
+
+def _reference_segments(rng: np.random.Generator, count: int) -> list[list[tuple[int, int]]]:
+    """The reference's endless reset: start row, then per segment a goal row and a level (8 columns apart)."""
+    from envs.mystery_path_generator import generate_path
+
+    segments, start = [], int(rng.integers(0, 7))
+    for s in range(count):
+        goal = int(rng.integers(0, 7))
+        path = generate_path(rng, 7, 7, (0, start), (6, goal)).path
+        segments.append([(x + 8 * s, y) for x, y in path] + [(8 * s + 7, goal)])
+        start = goal
+    return segments
+
+
+def test_endless_segments_are_built_lazily_with_the_reference_stream() -> None:
+    """Only the first segment is built at reset; a reset that continues the generator first makes the draws of
+    the segments the reference built in the previous episode, so the next level is the reference's."""
+    rng = envs.core.seeded_generator(21)
+    first = _reference_segments(rng, 3)
+    second = _reference_segments(rng, 3)
+    env = make("Endless-MysteryPath-v0")
+    env.reset(seed=21)
+    core = core_of(env)
+    assert core.num_segments[0] == 1
+    for _ in range(20):  # the no-op episode never leaves the first segment
+        env.step(0)
+    assert core.num_segments[0] == 1
+    env.reset()  # generator continued
+    tiles = list(zip(*core.path_tiles(0), strict=True))
+    assert tiles == [t for seg in second for t in seg]
+    env.reset(seed=21)
+    walk_endless_to_column(env, 8)  # entering the second segment builds what the reference has: three segments
+    assert core.num_segments[0] == 3
+    assert list(zip(*core.chain_lists[0], strict=True)) == [t for seg in first for t in seg]
