@@ -13,10 +13,14 @@ agent is put back on the path's first tile (the action of that step is ignored).
   Discrete(4): 0 none, 1 right, 2 up, 3 down. The episode ends after ``stamina_level`` steps without reaching a fresh
   tile, when the agent falls off behind its best column, or when it falls off twice at the same tile.
 
-State lives in arrays with a leading slot axis; only level generation runs per slot. Frames are drawn into a padded
-canvas (sprites near the edges need no clipping): the static Mystery Path background is copied and the sprites are
-scattered in with one fancy assignment per sprite kind; the scrolling Endless view is built band by band (every tile
-row of the screen consists of one "edge" pixel row pattern and one "middle" pattern).
+State lives in arrays with a leading slot axis, and the rules read per-episode tables built at reset (rewards by
+tile kind, velocities by action, grid moves by state). Many slots are stepped with array operations; one or two
+slots (the single-environment face) with the same rules one slot at a time, because a numpy call costs microseconds
+whatever its size (tests keep both ways identical). Frames are drawn into a padded canvas (sprites near the edges
+need no clipping): the static Mystery Path background is copied and the sprites are scattered in with one fancy
+assignment per sprite kind; the scrolling Endless view is built band by band (every tile row of the screen consists
+of one "edge" pixel row pattern and one "middle" pattern). Endless segments are generated from the reference's
+random stream in the reference's order, but only when first needed (see ``MysteryPathCore._enter_segment``).
 """
 
 from __future__ import annotations
