@@ -17,6 +17,9 @@ __all__ = ["BatchedCore", "MemoryGymEnv", "MemoryGymVectorEnv", "ENV_IDS", "make
 # id -> (core class path, variant arguments of that family)
 ENV_IDS: dict[str, tuple[str, dict[str, Any]]] = {
     "ProofOfMemory-v0": ("envs.proof_of_memory:ProofOfMemoryCore", {}),
+    "MysteryPath-v0": ("envs.mystery_path:MysteryPathCore", {}),
+    "MysteryPath-Grid-v0": ("envs.mystery_path:MysteryPathCore", {"grid": True}),
+    "Endless-MysteryPath-v0": ("envs.mystery_path:MysteryPathCore", {"endless": True}),
 }
 
 
