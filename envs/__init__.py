@@ -17,7 +17,10 @@ __all__ = ["BatchedCore", "MemoryGymEnv", "MemoryGymVectorEnv", "ENV_IDS", "make
 # id -> (core class path, variant arguments of that family)
 ENV_IDS: dict[str, tuple[str, dict[str, Any]]] = {
     "ProofOfMemory-v0": ("envs.proof_of_memory:ProofOfMemoryCore", {}),
+    "MysteryPath-v0": ("envs.mystery_path:MysteryPathCore", {}),
+    "MysteryPath-Grid-v0": ("envs.mystery_path:MysteryPathCore", {"grid": True}),
     "SearingSpotlights-v0": ("envs.searing_spotlights:SearingSpotlightsCore", {"endless": False}),
+    "Endless-MysteryPath-v0": ("envs.mystery_path:MysteryPathCore", {"endless": True}),
     "Endless-SearingSpotlights-v0": ("envs.searing_spotlights:SearingSpotlightsCore", {"endless": True}),
 }
 
