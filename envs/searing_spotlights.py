@@ -379,8 +379,8 @@ ACTION_PAIRS = np.array([(h, v) for h in range(3) for v in range(3)])
 ACTION_HEADING = np.where(
     continuous_heading(ACTION_PAIRS, np.full(9, -1)) < 0, -1, continuous_heading(ACTION_PAIRS, np.zeros(9, int)) // 45
 )
-NO_HOLES = np.zeros((1, SCREEN, ROW_BYTES), np.uint8)
-NO_HOLES.setflags(write=False)
+ACTION_WEIGHTS = np.array([3, 1])
+NEXT_HEADING = np.where(ACTION_HEADING[None, :] < 0, np.arange(8)[:, None], ACTION_HEADING[None, :])  # [heading, code]
 ROW = np.dtype((np.void, ROW_BYTES))  # one frame row as a single item, for fast row gathers and scatters
 NEVER = np.iinfo(np.int64).max
 
@@ -797,16 +797,14 @@ class SearingSpotlightsCore(BatchedCore):
 
     # ---------------------------------------------------------------------------------------------- step
     def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        actions = actions.reshape(-1, 2)
-        act = actions[:, 0] * 3 + actions[:, 1]
+        act = actions.reshape(-1, 2) @ ACTION_WEIGHTS  # 3 * horizontal + vertical
         n = act.shape[0]
         slots = self.all_slots if isinstance(idx, slice) else idx
         # 1. move, clamped into the walkable area below the HUD
         pos = self.pos[idx] + self.vel[slots, act]
         np.maximum(np.minimum(pos, self.pos_high[idx], out=pos), self.pos_low[idx], out=pos)
         self.pos[idx] = pos
-        turn = ACTION_HEADING[act]
-        self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
+        self.heading[idx] = NEXT_HEADING[self.heading[idx], act]
         # 2. the HUD shows the previous action and whether the previous reward was positive (decided in step 8)
         hud_code = np.array(self.next_hud[idx])  # a copy: next_hud is updated below
         # 3. the light dims until the threshold is passed: the alpha of step t is ``alpha(k)``
@@ -931,7 +929,7 @@ class SearingSpotlightsCore(BatchedCore):
         done = spots["done"]
         drawn = spots["listed"]
         removed = None
-        if done.any():
+        if done.any():  # (done is written below: ``removed`` and ``drawn`` are computed first)
             # The reference removes finished spotlights while iterating over its list, so the spotlight right
             # after a removed one is not visited in that step: not drawn, not moved, unable to hit.
             visited = np.ones_like(drawn)
@@ -941,19 +939,25 @@ class SearingSpotlightsCore(BatchedCore):
             removed = visited & done
             hits &= drawn
             near &= drawn
-            tau = np.where(drawn, tau + spots["speed"], tau)
+            speed = spots["speed"] * drawn  # only the visited spotlights move
         else:
-            tau = tau + spots["speed"]
-        store = self.spots if isinstance(idx, slice) else None
-        columns = {"tau": np.minimum(tau, 1.0), "done": tau >= 1.0, "centre": centre}
-        if removed is not None or store is None or not self.drawn_is_listed:
-            columns["drawn"] = drawn  # (else every listed spotlight was drawn in this and the last step)
-            self.drawn_is_listed = removed is None and store is not None
-        for name, value in columns.items():
-            if store is None:
-                self.spots[name][idx] = value
-            else:
-                store[name] = value
+            speed = spots["speed"]
+        store_drawn = removed is not None or not isinstance(idx, slice) or not self.drawn_is_listed
+        if isinstance(idx, slice):  # ``spots`` is a view: update in place
+            np.add(tau, speed, out=tau)
+            np.minimum(tau, 1.0, out=tau)
+            np.greater_equal(tau, 1.0, out=done)
+            spots["centre"] = centre
+            if store_drawn:
+                spots["drawn"] = drawn
+        else:
+            tau = np.minimum(tau + speed, 1.0)
+            self.spots["tau"][idx] = tau
+            self.spots["done"][idx] = tau >= 1.0
+            self.spots["centre"][idx] = centre
+            self.spots["drawn"][idx] = drawn
+        if store_drawn:  # (else every listed spotlight was drawn in this and the last step)
+            self.drawn_is_listed = removed is None and isinstance(idx, slice)
         if removed is not None and removed.any():
             base = base.copy()  # a view of the arrays that the removal compacts
             self._remove_spots(idx, removed)
