@@ -383,6 +383,7 @@ ACTION_WEIGHTS = np.array([3, 1])
 NEXT_HEADING = np.where(ACTION_HEADING[None, :] < 0, np.arange(8)[:, None], ACTION_HEADING[None, :])  # [heading, code]
 ROW = np.dtype((np.void, ROW_BYTES))  # one frame row as a single item, for fast row gathers and scatters
 NEVER = np.iinfo(np.int64).max
+SCREEN_CENTRE = pygame.math.Vector2(CENTRE, CENTRE)
 
 
 class AgentPixels:
@@ -667,12 +668,14 @@ class SearingSpotlightsCore(BatchedCore):
         grown = np.full((self.num_envs, capacity), self.unused_spot, SPOTS)
         grown[:, : self.spots.shape[1]] = self.spots
         self.spots = grown
+        self.unused_row = np.full(capacity, self.unused_spot, SPOTS)  # a list of unused positions, to copy from
 
     def _use_tables(self, max_radius: int) -> None:
         """Switch to hole tables that cover ``max_radius`` (the spotlights' table offsets are recomputed)."""
         if max_radius > self.tables.max_radius:
             self.tables = hole_tables(max_radius)
             self.unused_spot = self._unused_spot_record()
+            self.unused_row = np.full(self.spots.shape[1], self.unused_spot, SPOTS)
             self.spots["base"] = self.tables.base(self.spots["radius"])
 
     def _new_spot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> tuple:
@@ -682,11 +685,10 @@ class SearingSpotlightsCore(BatchedCore):
         start = rng.integers(0, 360)
         target = start + 180 + rng.integers(-45, 45)
         offset = target + rng.integers(-135, 135)
-        orbit = SPOT_ORBIT + radius
-        centre = pygame.math.Vector2(CENTRE, CENTRE)
+        orbit = pygame.math.Vector2(SPOT_ORBIT + radius, 0)
         points = []
         for angle in (start, target, offset):  # pygame's rotation, for the reference's exact floats
-            point = centre + pygame.math.Vector2(orbit, 0).rotate(float(angle))
+            point = SCREEN_CENTRE + orbit.rotate(float(angle))
             points.append(complex(point.x, point.y))
         reach = radius + float(self.agent_radius[k])
         near = radius + float(self.agent_near[k]) if self.agent_near[k] >= 0 else -1.0
@@ -729,7 +731,7 @@ class SearingSpotlightsCore(BatchedCore):
             self._grow_spots(max(count, 2 * self.spots.shape[1]))
         spots = self.spots[k]
         spots[:count] = [self._new_spot(k, rng, opts) for _ in range(count)]
-        spots[count:] = self.unused_spot
+        spots[count:] = self.unused_row[count:]
         self.spot_count[k] = count
         self.drawn_is_listed = False
         self.item_map[k] = 0
@@ -1054,6 +1056,11 @@ class SearingSpotlightsCore(BatchedCore):
     def _paste_agents(self, frames: np.ndarray, local: np.ndarray, slots: np.ndarray, where=None) -> None:
         """Paste the agents of ``slots`` into ``frames[local]`` (masked by ``where``, e.g. the holes)."""
         sprite = np.where(self.t[slots] > 0, self.heading[slots], 0)  # the reset frame shows it facing up
+        if len(slots) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
+            for i, k, heading in zip(local.tolist(), slots.tolist(), sprite.tolist(), strict=True):
+                planes = agent_planes(float(self.agent_scale[k]))[heading]
+                planes.paste(frames[i], self.x[k], self.y[k], None if where is None else where[i])
+            return
         scales = self.agent_scale[slots]
         if (scales == scales[0]).all():
             agent_pixels(float(scales[0])).paste(frames, local, self.x[slots], self.y[slots], sprite, where)
