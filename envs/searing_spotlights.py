@@ -5,8 +5,9 @@ the agent collects the coin(s) and then reaches the exit; in the endless variant
 coin after another, each within ``steps_per_coin`` steps. The agent, the coins and the exit are drawn under the
 darkness by default, so they are seen only inside a spotlight (and in the first, still lit frames).
 
-How a frame is drawn, array-native across slots. Most frames (darkness alpha 255, no spotlight rings) are
-"black everywhere, the lit picture inside the spotlight holes", so a frame is ``hole_mask & lit`` where
+How a frame is drawn, array-native across slots (frames are kept as (84, 252) byte rows). Most frames (darkness
+alpha 255, no spotlight rings) are "black everywhere, the lit picture inside the spotlight holes", so a frame is
+``hole_mask & lit`` where
 
 * ``lit`` is kept per slot and changes only when a coin is taken or the exit opens: the floor plus the coins and
   the exit, in a blue and a red (hit) version;
@@ -14,10 +15,16 @@ How a frame is drawn, array-native across slots. Most frames (darkness alpha 255
   every filled disc of pygame is a stack of such spans, so each spotlight contributes one table row per screen row,
   and rows crossed by two or more spotlights are OR-ed in a few extra passes.
 
-The agent (drawn under the darkness too) is pasted, masked by the holes, only in the slots where it is near a hole.
-Frames with a partly transparent darkness (the first steps while the light dims, ``light_threshold`` below 255) or
-with spotlight rings (``black_background``) blend the lit picture with the darkness using SDL's arithmetic,
-``D + trunc((S - D) * A / 255)``. The HUD rows come from small precomputed row tables.
+The agent (drawn under the darkness too) is pasted, masked by the holes, only in the slots where it is near a hole,
+with one scatter for all of them. Frames with a partly transparent darkness (the first steps while the light dims,
+``light_threshold`` below 255) or with spotlight rings (``black_background``) blend the lit picture with the
+darkness using SDL's arithmetic, ``D + trunc((S - D) * A / 255)``. The HUD rows come from small row tables.
+
+Mechanics per step are array operations as well: settings that depend only on the episode's options (velocities,
+bounds, the alpha of every step, draw orders) are derived once per distinct option set; whether the agent touches a
+coin or the exit is one lookup in a per-slot map of touching positions; spotlights are records in list order, with
+neutral values in unused positions so that the common step needs no masks. Only resets, spawns, pickups and the
+rare removal of finished spotlights run per slot.
 
 The mechanics follow memory-gym 1.0.2 (see docs/environment_notes.md, "Searing Spotlights", for the quirks that are
 kept and the few deliberate deviations).
@@ -74,7 +81,7 @@ def _common_options(endless: bool) -> dict[str, Option]:
         "coins_visible": Option(False, "bool", doc="draw coins above the darkness"),
         "agent_speed": Option(3.0, "float", 0, 84),
         "agent_health": Option(10 if endless else 5, "int", 1, None),
-        "agent_scale": Option(0.25, "float", 0.04, 1.0, doc="agent radius int(25 * scale)"),
+        "agent_scale": Option(0.25, "float", 0.05, 1.0, doc="agent radius int(25 * scale)"),
         "agent_visible": Option(False, "bool", doc="draw the agent above the darkness"),
         "sample_agent_position": Option(True, "bool", doc="False: the agent starts at the centre (42, 42)"),
         "show_last_action": Option(True, "bool", doc="HUD blocks with the previous action"),
@@ -376,9 +383,8 @@ def draw_order(entities: list[tuple[str, int, bool]]) -> tuple[tuple[str, ...], 
 
 # Heading index (heading // 45; -1: unchanged) per action code ``3 * horizontal + vertical``.
 ACTION_PAIRS = np.array([(h, v) for h in range(3) for v in range(3)])
-ACTION_HEADING = np.where(
-    continuous_heading(ACTION_PAIRS, np.full(9, -1)) < 0, -1, continuous_heading(ACTION_PAIRS, np.zeros(9, int)) // 45
-)
+_HEADINGS = continuous_heading(ACTION_PAIRS, np.full(9, -1))
+ACTION_HEADING = np.where(_HEADINGS < 0, -1, _HEADINGS // 45)
 ACTION_WEIGHTS = np.array([3, 1])
 NEXT_HEADING = np.where(ACTION_HEADING[None, :] < 0, np.arange(8)[:, None], ACTION_HEADING[None, :])  # [heading, code]
 ROW = np.dtype((np.void, ROW_BYTES))  # one frame row as a single item, for fast row gathers and scatters
