@@ -200,7 +200,9 @@ def test_reward_options(env_id: str) -> None:
 def test_visual_feedback_off_keeps_tiles_blue() -> None:
     env, core = make(MMB)
     steps = play(env, core, 0, {"visual_feedback": False})
-    assert all(tile_colours(s, core)[0] == {BLUE} for s in steps)
+    checks = [s["t"] for s in steps if s["reward"] != 0]
+    assert len(checks) == 10
+    assert all(tile_colours(steps[t + 1], core)[0] == {BLUE} for t in checks[:-1])  # lethal, yet blue
 
 
 def test_release_step_is_not_checked() -> None:
