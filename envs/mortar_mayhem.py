@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 import pygame
 
-from envs.core import BatchedCore, Index
+from envs.core import BatchedCore, BoundedDraws, Index
 from envs.drawing import SCREEN, Sprite, SpriteSheet, agent_sprites, round_half_away, surface_to_sprite
 from envs.movement import clamp_centre, continuous_heading, continuous_velocity, grid_step
 from envs.options import Option
@@ -63,20 +63,35 @@ def _tile(fill: tuple[int, int, int], border: tuple[int, int, int]) -> np.ndarra
     return tile
 
 
-@cache
-def arena_picture(size: int, lethal: bool) -> np.ndarray:
-    """The black screen with an all-blue (or all-red) arena of ``size`` x ``size`` tiles centred on it."""
+def arena_picture(size: int, lethal_except: tuple[int, int] | None = None) -> np.ndarray:
+    """The black screen with the arena centred on it: all tiles blue, or all red but the ``lethal_except`` tile."""
     frame = np.zeros((SCREEN, SCREEN, 3), dtype=np.uint8)
     left = arena_left(size)
-    tile = _tile(TILE_RED, TILE_RED_BORDER) if lethal else _tile(TILE_BLUE, TILE_BLUE_BORDER)
+    blue = _tile(TILE_BLUE, TILE_BLUE_BORDER)
+    tile = blue if lethal_except is None else _tile(TILE_RED, TILE_RED_BORDER)
     frame[left : left + TILE * size, left : left + TILE * size] = np.tile(tile, (size, size, 1))
-    frame.setflags(write=False)
+    if lethal_except is not None:
+        x, y = lethal_except
+        frame[left + TILE * y : left + TILE * (y + 1), left + TILE * x : left + TILE * (x + 1)] = blue
     return frame
 
 
 @cache
-def blue_tile() -> np.ndarray:
-    return _tile(TILE_BLUE, TILE_BLUE_BORDER)
+def backgrounds() -> tuple[np.ndarray, np.ndarray]:
+    """Every arena picture, stacked, and the index of each: ``[size, 0, 0]`` all blue, ``[size, 1 + x, y]`` all red
+    but tile (x, y). Painting a background is then one gather, for many slots at once."""
+    pictures = []
+    index = np.full((ENDLESS_ARENA + 1, ENDLESS_ARENA + 1, ENDLESS_ARENA), -1, dtype=np.int64)
+    for size in range(2, ENDLESS_ARENA + 1):
+        index[size, 0, 0] = len(pictures)
+        pictures.append(arena_picture(size))
+        for x in range(size):
+            for y in range(size):
+                index[size, 1 + x, y] = len(pictures)
+                pictures.append(arena_picture(size, (x, y)))
+    stack = np.stack(pictures)
+    stack.setflags(write=False)
+    return stack, index
 
 
 def arena_left(size: int) -> int:
@@ -146,9 +161,89 @@ def valid_commands(size: int, allowed: int) -> tuple[tuple[tuple[int, ...], ...]
     )
 
 
-def choice(rng: np.random.Generator, values: list) -> Any:
-    """``rng.choice(values)`` with the same RNG consumption (a list of one draws nothing), but faster."""
-    return values[int(rng.integers(0, len(values)))] if len(values) > 1 else values[0]
+# ------------------------------------------------------------------------------------------------- movement
+# Movement runs through transition tables built once per configuration from the shared movement rules, so a step
+# is a few gathers for any number of slots. Free movement: a key per slot and axis encodes (config, coordinate,
+# axis); MOVE[key + 2 * action_code] is the next key, COORD[key] its coordinate and TILE[key] its tile part
+# (8 * tile column on the x axis, tile row on the y axis, so that their sum identifies the tile).
+COORD_MARGIN = 16  # coordinates seen before a move: [-13, 97] on the torus (half a radius <= 12.5 past the edges)
+COORD_SPAN = SCREEN + 2 * COORD_MARGIN
+ACTIONS = np.array([(h, v) for h in range(3) for v in range(3)], dtype=np.int64)  # action code = 3 * h + v
+CODE_WEIGHTS = np.array([3, 1], dtype=np.int64)
+# sprite index (heading // 45) set by each action code; -1 keeps the heading (no input)
+HEADING_SPRITE = continuous_heading(ACTIONS, np.full(len(ACTIONS), -45, dtype=np.int64)) // 45
+
+
+def wrap_torus(v: np.ndarray, radius: int) -> np.ndarray:
+    """Endless arena: past half a radius beyond an edge the centre jumps to the opposite side.
+
+    Both tests see the unrounded jump target (-3.5 is not < -3.5); the integer rect rounds it afterwards.
+    """
+    margin = radius * 0.5
+    v = np.where(v > SCREEN + margin, -margin, v)
+    return round_half_away(np.where(v < -margin, SCREEN + margin, v))
+
+
+def free_move_rows(speed: float, radius: int, left: int, right: int, endless: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Next coordinate and tile part for every (coordinate, action code, axis) of one configuration."""
+    coords = np.arange(-COORD_MARGIN, SCREEN + COORD_MARGIN)
+    vx, vy = continuous_velocity(ACTIONS, np.full(len(ACTIONS), speed), truncate=not endless)
+    nxt = np.empty((COORD_SPAN, len(ACTIONS), 2), dtype=np.int64)
+    for axis, v in enumerate((vx, vy)):
+        moved = coords[:, None] + v[None, :]
+        if endless:  # float moves, rounded by the integer rect, then wrapped around the torus
+            nxt[:, :, axis] = wrap_torus(round_half_away(moved), radius)
+        else:
+            nxt[:, :, axis] = clamp_centre(moved.astype(np.int64), left + radius, right - radius)
+    tile = (coords - left) // TILE
+    return nxt, np.stack([8 * tile, tile], axis=1)
+
+
+class FreeMoves:
+    """Transition tables of free movement, one block per configuration (speed, radius, arena, torus or not)."""
+
+    def __init__(self) -> None:
+        self.configs: dict[tuple, int] = {}
+        self.move = np.zeros(0, dtype=np.int64)
+        self.coord = np.zeros(0, dtype=np.int64)
+        self.tile = np.zeros(0, dtype=np.int64)
+
+    def key(self, config: tuple, x: int, y: int) -> tuple[int, int]:
+        """Keys of the point (x, y) under ``config`` (its tables are built on first use)."""
+        base = self.configs.get(config)
+        if base is None:
+            base = self.configs[config] = len(self.move)
+            nxt, tile = free_move_rows(*config)
+            axis = np.arange(2)
+            keys = base + (nxt + COORD_MARGIN) * 2 * len(ACTIONS) + axis  # next key for (coord, code, axis)
+            self.move = np.concatenate([self.move, keys.reshape(-1)])
+            coords = np.arange(-COORD_MARGIN, SCREEN + COORD_MARGIN)
+            self.coord = np.concatenate([self.coord, np.repeat(coords, 2 * len(ACTIONS))])
+            self.tile = np.concatenate([self.tile, np.repeat(tile, len(ACTIONS), axis=0).reshape(-1)])
+        stride = 2 * len(ACTIONS)
+        return base + (x + COORD_MARGIN) * stride, base + (y + COORD_MARGIN) * stride + 1
+
+
+@cache
+def grid_moves() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[int, int]]:
+    """Grid movement over (arena size, tile, heading): next state per action, pixel centre, sprite and tile id.
+
+    State = base[size] + (column * size + row) * 4 + heading // 90; next state = MOVE[4 * state + action].
+    """
+    base, moves, pixels, sprites, tiles = {}, [], [], [], []
+    for size in range(2, ENDLESS_ARENA + 1):
+        base[size] = len(pixels)
+        left = arena_left(size)
+        cells = np.array([(c, r, h) for c in range(size) for r in range(size) for h in range(4)], dtype=np.int64)
+        block = []
+        for action in range(4):
+            cx, cy, heading = grid_step(np.full(len(cells), action), cells[:, 0], cells[:, 1], 90 * cells[:, 2], size)
+            block.append(base[size] + (cx * size + cy) * 4 + heading // 90)
+        moves.append(np.stack(block, axis=1).reshape(-1))  # [4 * state + action]
+        pixels += [(left + TILE * c + TILE // 2, left + TILE * r + TILE // 2) for c, r, _ in cells]
+        sprites += [2 * h for _, _, h in cells]
+        tiles += [8 * c + r for c, r, _ in cells]
+    return np.concatenate(moves), np.array(pixels, dtype=np.int64), np.array(sprites), np.array(tiles), base
 
 
 # ------------------------------------------------------------------------------------------------------- options
@@ -192,7 +287,13 @@ def variant_name(grid: bool, vector_observation: bool, endless: bool) -> str:
 
 # ---------------------------------------------------------------------------------------------------------- core
 class MortarMayhemCore(BatchedCore):
-    """All Mortar Mayhem variants, batched over ``num_envs`` slots."""
+    """All Mortar Mayhem variants, batched over ``num_envs`` slots.
+
+    The act phase of the reference counts up two counters (to D while the tiles are safe, to E while they are
+    lethal); here one countdown per slot, ``timer``, holds the steps left until the next event: a check (safe
+    phase) or the release (lethal phase). A step with ``timer == 0`` is that event, every other act step counts
+    down, and every step of the lethal phase that is not the release checks the agent's tile.
+    """
 
     def __init__(
         self,
@@ -231,14 +332,11 @@ class MortarMayhemCore(BatchedCore):
         self.frames_rows = self.frames.reshape(n, SCREEN, SCREEN * 3)  # a sprite row is one contiguous byte run
         self.background = np.zeros_like(self.frames)  # black screen + arena in its current colours
         self.vector = np.zeros((n, MAX_VECTOR_COMMANDS * 9), dtype=np.float32)
+        self.backgrounds, self.background_index = backgrounds()
         # level and parameters of each slot's episode
         self.size = np.zeros(n, i64)
         self.left = np.zeros(n, i64)  # arena left/top edge in px
-        self.low = np.zeros(n, i64)  # the agent centre is clamped to [low, high] (free movement)
-        self.high = np.zeros(n, i64)
-        self.speed = np.zeros(n)
-        self.radius = np.zeros(n, i64)
-        self.sheet_id = np.zeros(n, i64)  # which agent sprite sheet (agent_scale) the slot uses
+        self.sheet_id = np.zeros(n, i64)  # agent sprite sheet (agent_scale) of the slot
         self.commands = np.zeros((n, 16), i64)
         self.num_commands = np.zeros(n, i64)
         self.allowed = np.zeros(n, i64)
@@ -249,112 +347,148 @@ class MortarMayhemCore(BatchedCore):
         self.reward_success = np.zeros(n)
         self.reward_episode = np.zeros(n)
         self.visual_feedback = np.ones(n, bool)
-        # dynamic state
-        self.x = np.zeros(n, i64)  # agent centre, px
-        self.y = np.zeros(n, i64)
-        self.heading = np.zeros(n, i64)
-        self.target_x = np.zeros(n, i64)  # target tile
-        self.target_y = np.zeros(n, i64)
+        # agent: movement keys (free: one per axis; grid: one state), centre in px and sprite index (heading // 45)
+        self.move_key = np.zeros((n, 2), i64)
+        self.grid_key = np.zeros(n, i64)
+        self.pos = np.zeros((n, 2), i64)
+        self.sprite = np.zeros(n, i64)
+        # the act phase
+        self.target = np.zeros((n, 2), i64)
+        self.target_id = np.zeros(n, i64)  # 8 * column + row, compared with the agent's tile id
         self.current = np.zeros(n, i64)  # checks so far in this round
-        self.command_steps = np.zeros(n, i64)  # counts up to D while the tiles are safe
-        self.verify_steps = np.zeros(n, i64)  # counts up to E while the tiles are lethal
+        self.timer = np.zeros(n, i64)  # steps to the next check (safe tiles) or release (lethal tiles)
         self.tiles_on = np.zeros(n, bool)
         self.success = np.zeros(n, i64)
         self.completed_total = np.zeros(n, i64)  # passed checks over all rounds (endless)
         self.t = np.zeros(n, i64)
-        # clue stream: `clue_left` frames still to come; frame f shows command base + f // period if f % period < dur
-        self.clue_left = np.zeros(n, i64)
-        self.stream_len = np.zeros(n, i64)
-        self.stream_base = np.zeros(n, i64)
-        self.period = np.ones(n, i64)
-        self.duration = np.zeros(n, i64)
+        # clue stream: the icon (command, or -1 for a blank frame) of every frame; `clue_pos` is the frame on screen
+        self.stream = np.full((n, 64), -1, i64)
+        self.clue_pos = np.zeros(n, i64)
+        self.clue_left = np.zeros(n, i64)  # frames still to come
+        self.stream_period = np.ones(n, i64)
+        self.stream_duration = np.zeros(n, i64)
         self.debug_lag = np.zeros(n, i64)  # the debug icon runs one frame ahead in the streams between rounds
-        self.icon = np.full(n, -1, i64)
         # the sprite drawn last (kept across resets, like the reference's cached sprite and rect)
-        self.drawn_x = np.zeros(n, i64)
-        self.drawn_y = np.zeros(n, i64)
-        self.drawn_heading = np.zeros(n, i64)
+        self.drawn_pos = np.zeros((n, 2), i64)
+        self.drawn_sprite = np.zeros(n, i64)
+        self.drawn_sheet = np.zeros(n, i64)
         self.drawn_valid = np.zeros(n, bool)
-        self.drawn_sheet = np.zeros(n, i64)  # the stale sprite keeps its own agent_scale
+        self.fresh = np.zeros(n, bool)  # reset, not stepped yet
         self._sheets: list[SpriteSheet] = [agent_sheet(AGENT_SCALE)]
         self._sheet_scales: list[float] = [AGENT_SCALE]
+        self._free_moves = FreeMoves()
+        self._grid_moves = grid_moves()
         self._all = np.arange(n)
+
+    # test and tooling views of the agent state
+    @property
+    def x(self) -> np.ndarray:
+        return self.pos[:, 0]
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.pos[:, 1]
+
+    @property
+    def heading(self) -> np.ndarray:
+        return 45 * self.sprite
+
+    @property
+    def target_x(self) -> np.ndarray:
+        return self.target[:, 0]
+
+    @property
+    def target_y(self) -> np.ndarray:
+        return self.target[:, 1]
 
     # ------------------------------------------------------------------------------------------------ reset
     def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
         size = ENDLESS_ARENA if self.endless else opts["arena_size"]
         left = arena_left(size)
         allowed = opts["allowed_commands"]
-        tile = int(rng.integers(0, size * size))
+        # every draw below that has a range > 1 uses one word (the lists of valid commands hold >= 2 entries)
+        count_list = opts.get("command_count", [opts.get("initial_command_count")])
+        draws = BoundedDraws(rng, 1 + 2 * self.spawn_jitter + (len(count_list) > 1))
+        tile = draws.below(size * size)
         x, y = left + TILE * (tile // size) + TILE // 2, left + TILE * (tile % size) + TILE // 2
         if self.spawn_jitter:
-            jitter = rng.integers(-2, 2, size=2)
-            x, y = x + int(jitter[0]), y + int(jitter[1])
+            x, y = x + draws.below(4) - 2, y + draws.below(4) - 2
         start_x, start_y = (x - left) // TILE, (y - left) // TILE
-        if self.endless:
-            count = opts["initial_command_count"]
-            commands = [int(rng.integers(0, allowed))] if count == 1 else rng.integers(0, allowed, count).tolist()
-        else:
-            count = int(choice(rng, opts["command_count"]))
+        count = int(count_list[draws.below(len(count_list))]) if not self.endless else count_list[0]
+        lists = [opts["explosion_duration"], opts["explosion_delay"]]
+        if self.clue_phase:
+            lists = [opts["command_show_duration"], opts["command_show_delay"], *lists]
+        draws.reserve(count + sum(len(values) > 1 for values in lists))
+        if self.endless:  # uniform over the allowed commands, no validity filter (the targets wrap)
+            commands = [draws.below(allowed) for _ in range(count)]
+        else:  # a walk that stays inside the arena
             valid = valid_commands(size, allowed)
             commands, cx, cy = [], start_x, start_y
             for _ in range(count):
                 options = valid[cx][cy]
-                command = options[int(rng.integers(0, len(options)))]
+                command = options[draws.below(len(options))]
                 commands.append(command)
-                cx, cy = cx + COMMAND_DX[command], cy + COMMAND_DY[command]
-        if self.clue_phase:
-            duration = int(choice(rng, opts["command_show_duration"]))
-            delay = int(choice(rng, opts["command_show_delay"]))
-        else:
-            duration = delay = 0
-        self.lethal_steps[k] = choice(rng, opts["explosion_duration"])
-        self.act_steps[k] = choice(rng, opts["explosion_delay"])
+                cx, cy = cx + int(COMMAND_DX[command]), cy + int(COMMAND_DY[command])
+        picks = [int(values[draws.below(len(values))]) for values in lists]
+        draws.close()
+        duration, delay = picks[:2] if self.clue_phase else (0, 0)
+        lethal_steps, act_steps = picks[-2:]
 
-        self._ensure_capacity(count)
+        self._ensure_commands(count)
         self.commands[k, :count] = commands
-        self.num_commands[k] = count
-        self.allowed[k] = allowed
+        self.num_commands[k], self.allowed[k] = count, allowed
         self.size[k], self.left[k] = size, left
-        scale = AGENT_SCALE if self.grid else opts["agent_scale"]
-        radius = int(25 * scale)
-        self.radius[k] = radius
-        self.low[k], self.high[k] = left + radius, left + TILE * size - radius
-        self.speed[k] = 0.0 if self.grid else opts["agent_speed"]
-        self.sheet_id[k] = self._sheet_for(scale)
+        self.lethal_steps[k], self.act_steps[k] = lethal_steps, act_steps
         self.max_steps[k] = opts.get("max_steps", -1)
         self.reward_failure[k] = opts["reward_command_failure"]
         self.reward_success[k] = opts["reward_command_success"]
         self.reward_episode[k] = opts.get("reward_episode_success", 0.0)
         self.visual_feedback[k] = opts["visual_feedback"]
-        self.x[k], self.y[k], self.heading[k] = x, y, 0
-        tx, ty = start_x + COMMAND_DX[commands[0]], start_y + COMMAND_DY[commands[0]]
+        scale = AGENT_SCALE if self.grid else opts["agent_scale"]
+        self.sheet_id[k] = self._sheet_for(scale)
+        if self.grid:
+            self.grid_key[k] = self._grid_moves[4][size] + (start_x * size + start_y) * 4
+        else:
+            radius = int(25 * scale)
+            config = (opts["agent_speed"], radius, 0 if self.endless else left, left + TILE * size, self.endless)
+            self.move_key[k] = self._free_moves.key(config, x, y)
+        self.pos[k] = x, y
+        self.sprite[k] = 0
+        tx, ty = start_x + int(COMMAND_DX[commands[0]]), start_y + int(COMMAND_DY[commands[0]])
         if self.endless:
             tx, ty = tx % size, ty % size
-        self.target_x[k], self.target_y[k] = tx, ty
-        self.current[k] = self.command_steps[k] = self.verify_steps[k] = 0
+        self.target[k] = tx, ty
+        self.target_id[k] = 8 * tx + ty
+        self.current[k] = 0
+        self.timer[k] = act_steps  # the first act step is not a check (the reference's step counter starts at 0)
         self.tiles_on[k] = False
         self.success[k] = self.completed_total[k] = self.t[k] = 0
         period = duration + delay
-        self.period[k], self.duration[k] = max(period, 1), duration
-        self.stream_len[k] = count * period
-        self.clue_left[k] = max(count * period - 1, 0)  # the reset frame shows the stream's first frame
-        self.stream_base[k] = 0
+        length = count * period
+        self._ensure_stream(length)
+        if self.clue_phase:
+            frames = np.arange(length)
+            self.stream[k, :length] = np.where(frames % period < duration, self.commands[k, frames // period], -1)
+        self.clue_pos[k] = 0
+        self.clue_left[k] = max(length - 1, 0)  # the reset frame shows the stream's first frame
+        self.stream_period[k], self.stream_duration[k] = max(period, 1), duration
         self.debug_lag[k] = 0
-        self.icon[k] = commands[0] if self.clue_phase else -1
+        self.fresh[k] = True
         if self.vector_observation:
             self.vector[k] = 0.0
             self.vector[k, 9 * np.arange(count) + ONE_HOT_INDEX[commands]] = 1.0
-        self._paint_background(k)
+        self.background[k] = self.backgrounds[self.background_index[size, 0, 0]]
         one = np.array([k])
         icon_slots = one if self.clue_phase else one[:0]
-        self._compose(one, one, np.array([x]), np.array([y]), np.array([0]), self.sheet_id[one], icon_slots)
+        self._compose(one, one, self.pos[one], self.sprite[one] * 0, self.sheet_id[one], icon_slots)
 
-    def _ensure_capacity(self, count: int) -> None:
+    def _ensure_commands(self, count: int) -> None:
         if count > self.commands.shape[1]:
-            grown = np.zeros((self.num_envs, max(count, 2 * self.commands.shape[1])), dtype=np.int64)
-            grown[:, : self.commands.shape[1]] = self.commands
-            self.commands = grown
+            self.commands = _grown(self.commands, count, 0)
+
+    def _ensure_stream(self, length: int) -> None:
+        if length > self.stream.shape[1]:
+            self.stream = _grown(self.stream, length, -1)
 
     def _sheet_for(self, scale: float) -> int:
         if scale not in self._sheet_scales:
@@ -367,202 +501,185 @@ class MortarMayhemCore(BatchedCore):
         slots = self._all[idx]
         rewards = np.zeros(len(slots))
         terminated = np.zeros(len(slots), dtype=bool)
-        clue = self.clue_left[idx] > 0
-        if clue.any():
-            clue_slots = slots[clue]
-            self._advance_clue(clue_slots)
-            act_at = np.flatnonzero(~clue)
-            act: Index = slots[act_at]
-        else:
-            clue_slots, act_at, act = slots[:0], slice(None), idx
-        if not isinstance(act, np.ndarray) or act.size:
+        if self.fresh[idx].any():
+            self._first_step(slots[self.fresh[idx]])
+        clue_slots = slots[:0]
+        act_at: Index = slice(None)
+        act: Index = idx
+        if self.clue_phase:
+            clue = self.clue_left[idx] > 0
+            if clue.all():
+                clue_slots, act = slots, slots[:0]
+            elif clue.any():
+                clue_slots, act_at = slots[clue], np.flatnonzero(~clue)
+                act = slots[act_at]
+            if len(clue_slots):  # the next frame of the command stream; the agent is frozen, the action ignored
+                self.clue_pos[clue_slots] += 1
+                self.clue_left[clue_slots] -= 1
+        if not isinstance(act, np.ndarray) or len(act):
             rewards[act_at], terminated[act_at] = self._act(act, actions[act_at])
         if self.endless:
             self.t[idx] += 1
             terminated |= self.t[idx] == self.max_steps[idx]
         drawn = slice(None) if isinstance(idx, slice) else slots
-        x, y, heading, sheet = (
-            self.drawn_x[drawn],
-            self.drawn_y[drawn],
-            self.drawn_heading[drawn],
-            self.drawn_sheet[drawn],
+        self._compose(
+            drawn, slots, self.drawn_pos[drawn], self.drawn_sprite[drawn], self.drawn_sheet[drawn], clue_slots
         )
-        self._compose(drawn, slots, x, y, heading, sheet, clue_slots)
         return rewards, terminated
 
-    def _advance_clue(self, ks: np.ndarray) -> None:
-        """Show the next frame of the command stream; the agent is frozen and the action ignored."""
-        frame = self.stream_len[ks] - self.clue_left[ks]
-        period = self.period[ks]
-        command = self.commands[ks, self.stream_base[ks] + frame // period]
-        self.icon[ks] = np.where(frame % period < self.duration[ks], command, -1)
-        self.clue_left[ks] -= 1
-        if self.endless:  # the sprite drawn last stays (the reference caches it); only a fresh instance has none
-            ks = ks[~self.drawn_valid[ks]]
-            self.drawn_heading[ks] = 0
-        else:
-            self.drawn_heading[ks] = 0  # drawn facing up; a grid agent's heading also stays up until it acts
-        self.drawn_x[ks], self.drawn_y[ks], self.drawn_sheet[ks] = self.x[ks], self.y[ks], self.sheet_id[ks]
+    def _first_step(self, ks: np.ndarray) -> None:
+        """The first step after a reset: the drawn sprite becomes this episode's agent, except in the endless
+        variant's clue stream, where a sprite drawn before (in an earlier episode) stays."""
+        if self.endless:
+            ks = ks[(self.clue_left[ks] == 0) | ~self.drawn_valid[ks]]
+        self.drawn_pos[ks], self.drawn_sprite[ks], self.drawn_sheet[ks] = self.pos[ks], 0, self.sheet_id[ks]
         self.drawn_valid[ks] = True
+        self.fresh[ks] = False
 
     def _act(self, sel: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Move, then run the command checks of the act phase. ``sel`` are slots outside the clue phase."""
-        left = self.left[sel]
+        """Move, then run the act phase. ``sel`` are slots outside the clue phase."""
         if self.grid:
-            cx, cy, heading = grid_step(
-                actions, (self.x[sel] - left) // TILE, (self.y[sel] - left) // TILE, self.heading[sel], self.size[sel]
-            )
-            x, y = left + TILE * cx + TILE // 2, left + TILE * cy + TILE // 2
+            key = self._grid_moves[0][4 * self.grid_key[sel] + actions.reshape(-1)]
+            self.grid_key[sel] = key
+            pos, sprite, tile_id = self._grid_moves[1][key], self._grid_moves[2][key], self._grid_moves[3][key]
         else:
-            actions = actions.reshape(-1, 2)
-            heading = continuous_heading(actions, self.heading[sel])
-            vx, vy = continuous_velocity(actions, self.speed[sel], truncate=not self.endless)
-            if self.endless:  # float moves, rounded by the integer rect, then wrapped around the torus
-                x = self._wrap(round_half_away(self.x[sel] + vx), sel)
-                y = self._wrap(round_half_away(self.y[sel] + vy), sel)
-            else:
-                low, high = self.low[sel], self.high[sel]
-                x = clamp_centre(self.x[sel] + vx.astype(np.int64), low, high)
-                y = clamp_centre(self.y[sel] + vy.astype(np.int64), low, high)
-        self.x[sel], self.y[sel], self.heading[sel] = x, y, heading
-        self.drawn_x[sel], self.drawn_y[sel], self.drawn_heading[sel] = x, y, heading
-        self.drawn_sheet[sel] = self.sheet_id[sel]
-        self.drawn_valid[sel] = True
-        on_target = ((x - left) // TILE == self.target_x[sel]) & ((y - left) // TILE == self.target_y[sel])
+            code = actions.reshape(-1, 2) @ CODE_WEIGHTS
+            moves = self._free_moves
+            key = moves.move[self.move_key[sel] + 2 * code[:, None]]
+            self.move_key[sel] = key
+            pos = moves.coord[key]
+            turn = HEADING_SPRITE[code]
+            sprite = np.where(turn < 0, self.sprite[sel], turn)
+            tile_id = None
+        self.pos[sel], self.sprite[sel] = pos, sprite
+        self.drawn_pos[sel], self.drawn_sprite[sel] = pos, sprite
 
-        rewards = np.zeros(len(x))
-        terminated = np.zeros(len(x), dtype=bool)
-        # copies: with a slice `sel` these would be views, and the tile state is written back below
-        command_steps, tiles_on = self.command_steps[sel], self.tiles_on[sel].copy()
-        verify = (command_steps % self.act_steps[sel] == 0) & (command_steps > 0) & ~tiles_on
-        lethal = tiles_on
-        if verify.any():
+        timer = self.timer[sel]
+        event = timer == 0
+        self.timer[sel] = timer - 1  # events set their own timer below
+        lethal = self.tiles_on[sel]  # a view when `sel` is a slice: every mask derived from it is taken below
+        watched = lethal | event
+        rewards = np.zeros(len(pos))
+        terminated = np.zeros(len(pos), dtype=bool)
+        if not watched.any():
+            return rewards, terminated
+        if tile_id is None:
+            tile_id = self._free_moves.tile[key].sum(axis=1)
+        on_target = tile_id == self.target_id[sel]
+        dies = lethal & ~event & ~on_target  # a lethal step that is not the release
+        if dies.any():
+            rewards[dies] = self.reward_failure[self._all[sel][dies]]
+            terminated |= dies
+        if event.any():
             slots = self._all[sel]
-            current, count = self.current[sel], self.num_commands[sel]
-            check = verify & (current < count)
-            current = current + check
-            passed = check & on_target
-            rewards = np.where(check, np.where(on_target, self.reward_success[sel], self.reward_failure[sel]), 0.0)
-            terminated = check & ~on_target
-            round_over = verify & (current >= count)
-            self.current[sel] = current
-            self.completed_total[sel] += passed
-            command_steps = np.where(verify, 1, command_steps)
-            lethal = tiles_on | check
-            if self.endless:
-                for k in slots[round_over]:
-                    self._next_round(int(k))
-            else:
-                terminated |= round_over
-                rewards = rewards + np.where(round_over, self.reward_episode[sel], 0.0)
-                self.success[sel] = round_over
-            self.tiles_on[sel] = lethal
-            for k in slots[check]:
-                self._paint_background(int(k))
-        if lethal.any():
-            slots = self._all[sel]
-            verify_steps = self.verify_steps[sel]  # read after the checks: a new endless round restarts the count
-            release = lethal & (verify_steps % self.lethal_steps[sel] == 0) & (verify_steps > 0)
-            hold = lethal & ~release
-            dies = hold & ~on_target
-            terminated = terminated | dies
-            rewards = np.where(dies, self.reward_failure[sel], rewards)  # an assignment in the reference
-            self.verify_steps[sel] = np.where(release, 0, verify_steps + hold)
-            if release.any():
-                self.tiles_on[sel] = lethal & ~release
-                for k in slots[release]:
-                    self._release(int(k))
-        self.command_steps[sel] = command_steps + ~lethal
+            releases, checks = event & lethal, event & ~lethal  # both before the handlers change `lethal` (a view)
+            if releases.any():
+                self._release(slots[releases])
+            if checks.any():
+                rewards[checks], terminated[checks] = self._check(slots[checks], on_target[checks])
         return rewards, terminated
 
-    def _wrap(self, v: np.ndarray, sel: Index) -> np.ndarray:
-        """Torus wrap of the endless arena: past half a radius beyond an edge, jump to the opposite side.
+    def _check(self, ks: np.ndarray, on_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Command checks: all tiles but the target turn lethal; pass or end the episode."""
+        current = self.current[ks] + 1
+        self.current[ks] = current
+        self.completed_total[ks] += on_target
+        failure = self.reward_failure[ks]
+        rewards = np.where(on_target, self.reward_success[ks], failure)
+        terminated = ~on_target
+        round_over = current >= self.num_commands[ks]
+        if not self.endless:  # the last check ends the episode as a success, whatever its outcome
+            self.success[ks] = round_over
+            rewards = rewards + np.where(round_over, self.reward_episode[ks], 0.0)
+            terminated |= round_over
+        # the same step is the first of the lethal phase: standing elsewhere is failure (assigned, not added)
+        rewards = np.where(on_target, rewards, failure)
+        self.tiles_on[ks] = True
+        self.timer[ks] = self.lethal_steps[ks] - 1
+        self._paint(ks)
+        if self.endless:
+            for k in ks[round_over].tolist():
+                self._next_round(k)
+        return rewards, terminated
 
-        Both tests see the unrounded jump target (-3.5 is not < -3.5); the rect rounds it afterwards.
-        """
-        margin = self.radius[sel] * 0.5
-        v = np.where(v > SCREEN + margin, -margin, v)
-        return round_half_away(np.where(v < -margin, SCREEN + margin, v))
+    def _release(self, ks: np.ndarray) -> None:
+        """The lethal phase is over: tiles back to blue, and the target moves on by the next command."""
+        self.tiles_on[ks] = False
+        self.timer[ks] = self.act_steps[ks] - 1
+        current = self.current[ks]
+        more = current < self.num_commands[ks]
+        command = self.commands[ks, np.minimum(current, self.commands.shape[1] - 1)]
+        target = self.target[ks] + np.where(more[:, None], np.stack([COMMAND_DX[command], COMMAND_DY[command]], 1), 0)
+        if self.endless:
+            target %= ENDLESS_ARENA
+        self.target[ks] = target
+        self.target_id[ks] = 8 * target[:, 0] + target[:, 1]
+        self._paint(ks)
 
     def _next_round(self, k: int) -> None:
         """Endless: after a round's last check, append one command and show only its icon; the tiles stay lethal."""
         count = int(self.num_commands[k])
-        self._ensure_capacity(count + 1)
-        self.commands[k, count] = int(self.rngs[k].integers(0, int(self.allowed[k])))
+        self._ensure_commands(count + 1)
+        command = BoundedDraws(self.rngs[k], 1).below(int(self.allowed[k]))
+        self.commands[k, count] = command
         self.num_commands[k] = count + 1
         self.current[k] = 0
-        self.verify_steps[k] = 0
-        period = int(self.period[k])
-        self.stream_len[k] = self.clue_left[k] = period
-        self.stream_base[k] = count
+        period, duration = int(self.stream_period[k]), int(self.stream_duration[k])
+        self.stream[k, :period] = [command] * duration + [-1] * (period - duration)
+        self.clue_pos[k] = -1  # the stream starts on the next step
+        self.clue_left[k] = period
         self.debug_lag[k] = 1
 
-    def _release(self, k: int) -> None:
-        """The lethal phase is over: tiles back to blue, and the target moves on by the next command."""
-        if self.current[k] < self.num_commands[k]:
-            command = self.commands[k, self.current[k]]
-            tx, ty = self.target_x[k] + COMMAND_DX[command], self.target_y[k] + COMMAND_DY[command]
-            if self.endless:
-                tx, ty = tx % ENDLESS_ARENA, ty % ENDLESS_ARENA
-            self.target_x[k], self.target_y[k] = tx, ty
-        self._paint_background(k)
-
     # ---------------------------------------------------------------------------------------------- drawing
-    def _paint_background(self, k: int) -> None:
-        size = int(self.size[k])
-        if self.tiles_on[k] and self.visual_feedback[k]:
-            self.background[k] = arena_picture(size, True)
-            left = int(self.left[k])
-            r, c = left + TILE * int(self.target_y[k]), left + TILE * int(self.target_x[k])
-            self.background[k, r : r + TILE, c : c + TILE] = blue_tile()
-        else:
-            self.background[k] = arena_picture(size, False)
+    def _paint(self, ks: np.ndarray) -> None:
+        """Backgrounds of slots whose tiles changed colour: all red but the target, or all blue."""
+        red = self.tiles_on[ks] & self.visual_feedback[ks]
+        target = self.target[ks]
+        which = self.background_index[self.size[ks], np.where(red, 1 + target[:, 0], 0), np.where(red, target[:, 1], 0)]
+        self.background[ks] = self.backgrounds[which]
 
     def _compose(
         self,
         sel: Index,
         slots: np.ndarray,
-        x: np.ndarray,
-        y: np.ndarray,
-        heading: np.ndarray,
+        pos: np.ndarray,
+        sprite: np.ndarray,
         sheet_ids: np.ndarray,
         icon_slots: np.ndarray,
     ) -> None:
         """Frames of ``slots`` (= ``sel`` as an index): background, the agent sprite, and the icon of clue slots."""
         self.frames[sel] = self.background[sel]
-        which = heading // 45
         if len(self._sheets) == 1:
-            self._sheets[0].paste(self.frames_rows, slots, y, x, which)
+            self._sheets[0].paste(self.frames_rows, slots, pos[:, 1], pos[:, 0], sprite)
         else:
             for s in np.unique(sheet_ids):
                 mine = sheet_ids == s
-                self._sheets[s].paste(self.frames_rows, slots[mine], y[mine], x[mine], which[mine])
+                self._sheets[s].paste(self.frames_rows, slots[mine], pos[mine, 1], pos[mine, 0], sprite[mine])
         if len(icon_slots):
-            icons = self.icon[icon_slots]
+            icons = self.stream[icon_slots, self.clue_pos[icon_slots]]
             shown = icons >= 0
             if shown.any():
-                ks, icons = icon_slots[shown], icons[shown]
+                ks = icon_slots[shown]
                 corner = np.full(len(ks), ICON_CORNER)
-                icon_sheet().paste(self.frames_rows, ks, corner, corner, icons)
+                icon_sheet().paste(self.frames_rows, ks, corner, corner, icons[shown])
 
     def _debug_frame(self, k: int) -> np.ndarray:
         frame = self.background[k].copy()
         rows = frame.reshape(1, SCREEN, SCREEN * 3)
         zero = np.zeros(1, dtype=np.int64)
         if self.drawn_valid[k]:
-            x, y, heading, sheet = self.drawn_x[k], self.drawn_y[k], self.drawn_heading[k], self.drawn_sheet[k]
+            (x, y), sprite, sheet = self.drawn_pos[k], self.drawn_sprite[k], self.drawn_sheet[k]
         else:
-            x, y, heading, sheet = self.x[k], self.y[k], 0, self.sheet_id[k]
-        self._sheets[sheet].paste(rows, zero, zero + y, zero + x, zero + heading // 45)
+            (x, y), sprite, sheet = self.pos[k], 0, self.sheet_id[k]
+        self._sheets[sheet].paste(rows, zero, zero + y, zero + x, zero + sprite)
         if self.clue_left[k] > 0:  # the reference's render keeps its own copy of the stream (see the module doc)
-            frame_no = self.stream_len[k] - 1 - self.clue_left[k] + self.debug_lag[k]
-            if frame_no % self.period[k] < self.duration[k]:
-                command = self.commands[k, self.stream_base[k] + frame_no // self.period[k]]
+            command = self.stream[k, self.clue_pos[k] + self.debug_lag[k]]
+            if command >= 0:
                 icon_sheet().paste(rows, zero, zero + ICON_CORNER, zero + ICON_CORNER, zero + command)
         ring, offset = target_ring()
         centre = int(self.left[k]) + TILE // 2
         ring.paste(
-            frame, centre + TILE * int(self.target_y[k]) + offset, centre + TILE * int(self.target_x[k]) + offset
+            frame, centre + TILE * int(self.target[k, 1]) + offset, centre + TILE * int(self.target[k, 0]) + offset
         )
         return frame
 
@@ -587,8 +704,14 @@ class MortarMayhemCore(BatchedCore):
 
     def _step_info(self, k: int) -> dict[str, Any]:
         if self.endless:
-            return {"ground_truth": np.array([self.target_x[k], self.target_y[k]], dtype=np.float64) / 5.0}
+            return {"ground_truth": self.target[k] / 5.0}
         return {}
 
     def render_fps(self, k: int) -> int:
         return CLUE_FPS if self.clue_left[k] > 0 else self.base_render_fps
+
+
+def _grown(array: np.ndarray, needed: int, fill: int) -> np.ndarray:
+    grown = np.full((array.shape[0], max(needed, 2 * array.shape[1])), fill, dtype=array.dtype)
+    grown[:, : array.shape[1]] = array
+    return grown
