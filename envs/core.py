@@ -50,38 +50,57 @@ class BoundedDraws:
     """``rng.integers(0, high)`` values (so also ``rng.choice`` of lists) one by one, from bulk draws of raw words.
 
     numpy draws a bounded int below ``high <= 2**32`` with Lemire's method on 32-bit words: one word, unless a
-    (very rare) rejection asks for another, and no word at all for ``high == 1``. Emulating that on words drawn in
-    bulk gives the same values and leaves the generator in the same state as the scalar calls, at a fraction of
-    their cost. ``reserve(n)`` draws n words at once: only reserve words that ``below`` will certainly use (each
-    call with ``high > 1`` uses at least one); a reservation that runs short is topped up word by word.
+    (very rare) rejection asks for another, and no word at all for ``high == 1``. A 32-bit word is the low half of
+    a fresh 64-bit output, or the high half left over (buffered in the bit generator) by the previous word.
+    Emulating that on 64-bit outputs drawn in bulk (``random_raw``) gives the same values and leaves the generator
+    in the same state as the scalar calls, at a fraction of their cost.
+
+    ``buffered`` says whether the generator holds a leftover half word now (False right after seeding); read it
+    back afterwards to continue the generator later. ``reserve(n)`` draws n words at once: only reserve words that
+    ``below`` will certainly use (each call with ``high > 1`` uses at least one); if they run short (a rejection),
+    more are drawn word by word.
     """
 
-    __slots__ = ("rng", "words", "used")
+    __slots__ = ("rng", "words", "used", "buffered")
 
-    def __init__(self, rng: np.random.Generator, reserve: int = 0) -> None:
-        self.rng, self.words, self.used = rng, [], 0
+    def __init__(self, rng: np.random.Generator, reserve: int = 0, buffered: bool = False) -> None:
+        self.rng, self.words, self.used, self.buffered = rng, [], 0, buffered
         self.reserve(reserve)
 
+    def _word(self) -> int:
+        """One word through numpy itself, which keeps the leftover half in the bit generator."""
+        self.buffered = not self.buffered
+        return int(self.rng.integers(0, _WORD, dtype=np.uint32))
+
     def reserve(self, count: int) -> None:
-        if count > 0:
-            self.words += self.rng.integers(0, _WORD, size=count, dtype=np.uint32).tolist()
+        if count <= 0:
+            return
+        if self.buffered:
+            self.words.append(self._word())
+            count -= 1
+        if count >= 2:
+            for raw in self.rng.bit_generator.random_raw(count // 2).tolist():
+                self.words += (raw & (_WORD - 1), raw >> 32)  # low half first, as numpy's next_uint32 does
+        if count % 2:
+            self.words.append(self._word())
 
     def below(self, high: int) -> int:
         if high <= 1:
             return 0
         while True:
             if self.used == len(self.words):
-                self.words.append(int(self.rng.integers(0, _WORD, dtype=np.uint32)))
+                self.words.append(self._word())
             product = self.words[self.used] * high
             self.used += 1
             low_bits = product & (_WORD - 1)
             if low_bits >= high or low_bits >= (_WORD - high) % high:
                 return product >> 32
 
-    def close(self) -> None:
-        """Check that every reserved word was used (otherwise the generator ran ahead of the reference)."""
+    def close(self) -> bool:
+        """Check that every reserved word was used (otherwise the generator ran ahead); return ``buffered``."""
         if self.used != len(self.words):
             raise RuntimeError(f"{len(self.words) - self.used} reserved random words were not used")
+        return self.buffered
 
 
 class BatchedCore:
@@ -263,9 +282,14 @@ class MemoryGymEnv(gym.Env):
         self._window: HumanWindow | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        super().reset(seed=seed)
+        # Not ``super().reset(seed)``: that would seed a second generator (as costly as the level) only to replace
+        # it. env.np_random is the generator that builds the levels; np_random_seed follows gymnasium's rules.
         self.core.reset_slot(0, seed, options)
-        self._np_random = self.core.rngs[0]  # env.np_random is the generator that builds the levels
+        self._np_random = self.core.rngs[0]
+        if seed is not None:
+            self._np_random_seed = int(seed)
+        elif self._np_random_seed is None:
+            self._np_random_seed = -1  # gymnasium's value for a generator that was not seeded through reset
         if self.render_mode == "human":
             self.render()
         return self._obs(), self.core.step_info(0)

@@ -141,6 +141,9 @@ class SpriteSheet:
         self.rgb = np.stack([s.rgb[r0:r1, c0:c1].reshape(self.height, -1) for s in sprites])
         self.mask = np.stack([np.repeat(s.mask[r0:r1, c0:c1], 3, axis=1) for s in sprites])
         self._rgb_list, self._mask_list = list(self.rgb), list(self.mask)
+        # for batches: frame bytes to keep (255 where transparent) and sprite bytes (0 where transparent)
+        self.keep = np.where(self.mask, 0, 255).astype(np.uint8)
+        self.ink = np.where(self.mask, self.rgb, 0).astype(np.uint8)
         self._windows: dict[tuple, np.ndarray] = {}
 
     def _window_view(self, frames: np.ndarray) -> np.ndarray:
@@ -163,32 +166,41 @@ class SpriteSheet:
             self._windows[key] = view
         return view
 
+    def paste_one(self, frame: np.ndarray, row: int, col: int, which: int) -> None:
+        """Paste sprite ``which`` into one ``(H, W * 3)`` frame with its anchor on pixel (row, col), clipped."""
+        top, left = row + self.top, col + self.left
+        height, width = frame.shape[0], frame.shape[1] // 3
+        if 0 <= top <= height - self.height and 0 <= left <= width - self.width:
+            window = frame[top : top + self.height, 3 * left : 3 * (left + self.width)]
+            np.copyto(window, self._rgb_list[which], where=self._mask_list[which])
+            return
+        r0, r1 = max(top, 0), min(top + self.height, height)
+        c0, c1 = max(left, 0), min(left + self.width, width)
+        if r0 < r1 and c0 < c1:
+            sub = (slice(r0 - top, r1 - top), slice(3 * (c0 - left), 3 * (c1 - left)))
+            np.copyto(frame[r0:r1, 3 * c0 : 3 * c1], self._rgb_list[which][sub], where=self._mask_list[which][sub])
+
     def paste(
         self, frames: np.ndarray, slots: np.ndarray, rows: np.ndarray, cols: np.ndarray, which: np.ndarray
     ) -> None:
-        top, left = rows + self.top, cols + self.left
-        height, width = frames.shape[1], frames.shape[2] // 3
-        inside = (top >= 0) & (left >= 0) & (top <= height - self.height) & (left <= width - self.width)
-        if inside.sum() >= self.BATCH_MIN:
+        """Paste sprite ``which[i]`` into frame ``slots[i]`` with its anchor on pixel (rows[i], cols[i]), clipped."""
+        if len(slots) >= self.BATCH_MIN:
+            top, left = rows + self.top, cols + self.left
+            height, width = frames.shape[1], frames.shape[2] // 3
+            # unsigned views: a negative corner becomes huge, so one comparison per axis tests both bounds
+            inside = (top.view(np.uint64) <= height - self.height) & (left.view(np.uint64) <= width - self.width)
             windows = self._window_view(frames)
-            k, t, c, w = slots[inside], top[inside], left[inside], which[inside]
+            if inside.all():
+                k, t, c, w = slots, top, left, which
+            else:
+                k, t, c, w = slots[inside], top[inside], left[inside], which[inside]
             patch = windows[k, t, c]
-            np.copyto(patch, self.rgb[w], where=self.mask[w])
+            patch &= self.keep[w]  # bitwise compositing: half the cost of copyto(where=) on many small windows
+            patch |= self.ink[w]
             windows[k, t, c] = patch
             if inside.all():
                 return
             outside = ~inside
-            slots, top, left, which = slots[outside], top[outside], left[outside], which[outside]
-        h3 = 3 * self.width
-        for k, t, c, w in zip(slots.tolist(), top.tolist(), left.tolist(), which.tolist(), strict=True):
-            if 0 <= t <= height - self.height and 0 <= c <= width - self.width:
-                np.copyto(
-                    frames[k, t : t + self.height, 3 * c : 3 * c + h3], self._rgb_list[w], where=self._mask_list[w]
-                )
-                continue
-            r0, r1 = max(t, 0), min(t + self.height, height)
-            c0, c1 = max(c, 0), min(c + self.width, width)
-            if r0 >= r1 or c0 >= c1:
-                continue
-            sub = (slice(r0 - t, r1 - t), slice(3 * (c0 - c), 3 * (c1 - c)))
-            np.copyto(frames[k, r0:r1, 3 * c0 : 3 * c1], self._rgb_list[w][sub], where=self._mask_list[w][sub])
+            slots, rows, cols, which = slots[outside], rows[outside], cols[outside], which[outside]
+        for k, row, col, w in zip(slots.tolist(), rows.tolist(), cols.tolist(), which.tolist(), strict=True):
+            self.paste_one(frames[k], row, col, w)

@@ -39,9 +39,10 @@ from envs.options import Option
 
 # The fixed command list (generation order), its tile offsets, and where each command sits in the one-hot vector.
 COMMANDS = ("right", "down", "left", "up", "stay", "right_down", "right_up", "left_down", "left_up")
-COMMAND_DX = np.array([1, 0, -1, 0, 0, 1, 1, -1, -1], dtype=np.int64)
-COMMAND_DY = np.array([0, 1, 0, -1, 0, 1, -1, 1, -1], dtype=np.int64)
-ONE_HOT_INDEX = np.array([1, 4, 2, 3, 0, 5, 6, 7, 8], dtype=np.int64)
+COMMAND_DELTAS = ((1, 0), (0, 1), (-1, 0), (0, -1), (0, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
+COMMAND_DX = np.array([dx for dx, _ in COMMAND_DELTAS], dtype=np.int64)
+COMMAND_DY = np.array([dy for _, dy in COMMAND_DELTAS], dtype=np.int64)
+ONE_HOT_INDEX = (1, 4, 2, 3, 0, 5, 6, 7, 8)
 ICON_ANGLE = (0, 270, 180, 90, None, 315, 45, 225, 135)  # rotation of the right arrow; None = the "stay" sign
 MAX_VECTOR_COMMANDS = 20
 
@@ -79,7 +80,7 @@ def arena_picture(size: int, lethal_except: tuple[int, int] | None = None) -> np
 @cache
 def backgrounds() -> tuple[np.ndarray, np.ndarray]:
     """Every arena picture, stacked, and the index of each: ``[size, 0, 0]`` all blue, ``[size, 1 + x, y]`` all red
-    but tile (x, y). Painting a background is then one gather, for many slots at once."""
+    but tile (x, y). Painting the backgrounds of many slots is then one gather."""
     pictures = []
     index = np.full((ENDLESS_ARENA + 1, ENDLESS_ARENA + 1, ENDLESS_ARENA), -1, dtype=np.int64)
     for size in range(2, ENDLESS_ARENA + 1):
@@ -154,7 +155,7 @@ def valid_commands(size: int, allowed: int) -> tuple[tuple[tuple[int, ...], ...]
     """For every tile (x, y): the allowed commands, in list order, that keep the walk inside the arena."""
     return tuple(
         tuple(
-            tuple(c for c in range(allowed) if 0 <= x + COMMAND_DX[c] < size and 0 <= y + COMMAND_DY[c] < size)
+            tuple(c for c, (dx, dy) in enumerate(COMMAND_DELTAS[:allowed]) if 0 <= x + dx < size and 0 <= y + dy < size)
             for y in range(size)
         )
         for x in range(size)
@@ -330,9 +331,10 @@ class MortarMayhemCore(BatchedCore):
         i64 = np.int64
         self.frames = np.zeros((n, SCREEN, SCREEN, 3), dtype=np.uint8)
         self.frames_rows = self.frames.reshape(n, SCREEN, SCREEN * 3)  # a sprite row is one contiguous byte run
-        self.background = np.zeros_like(self.frames)  # black screen + arena in its current colours
         self.vector = np.zeros((n, MAX_VECTOR_COMMANDS * 9), dtype=np.float32)
         self.backgrounds, self.background_index = backgrounds()
+        # black screen + arena in its current colours (a per-slot copy: copying it is cheaper than gathering)
+        self.background = np.zeros_like(self.frames)
         # level and parameters of each slot's episode
         self.size = np.zeros(n, i64)
         self.left = np.zeros(n, i64)  # arena left/top edge in px
@@ -374,6 +376,9 @@ class MortarMayhemCore(BatchedCore):
         self.drawn_sheet = np.zeros(n, i64)
         self.drawn_valid = np.zeros(n, bool)
         self.fresh = np.zeros(n, bool)  # reset, not stepped yet
+        # whether each slot's generator holds a leftover 32-bit half word (see BoundedDraws), and which generator
+        self.half_word = [False] * n
+        self._rng_seen: list[np.random.Generator | None] = [None] * n
         self._sheets: list[SpriteSheet] = [agent_sheet(AGENT_SCALE)]
         self._sheet_scales: list[float] = [AGENT_SCALE]
         self._free_moves = FreeMoves()
@@ -406,19 +411,26 @@ class MortarMayhemCore(BatchedCore):
         size = ENDLESS_ARENA if self.endless else opts["arena_size"]
         left = arena_left(size)
         allowed = opts["allowed_commands"]
-        # every draw below that has a range > 1 uses one word (the lists of valid commands hold >= 2 entries)
         count_list = opts.get("command_count", [opts.get("initial_command_count")])
-        draws = BoundedDraws(rng, 1 + 2 * self.spawn_jitter + (len(count_list) > 1))
+        lists = [opts["explosion_duration"], opts["explosion_delay"]]
+        if self.clue_phase:
+            lists = [opts["command_show_duration"], opts["command_show_delay"], *lists]
+        choices = sum(len(values) > 1 for values in lists)
+        # Each draw below with a range > 1 uses one word (a list of valid commands holds >= 2 entries), so all
+        # words can be drawn at once when the command count is fixed; else the count is drawn first.
+        words = 1 + 2 * self.spawn_jitter + (len(count_list) > 1)
+        if len(count_list) == 1:
+            words += count_list[0] + choices
+        buffered = self.half_word[k] and rng is self._rng_seen[k]  # a fresh generator holds no leftover half word
+        draws = BoundedDraws(rng, words, buffered)
         tile = draws.below(size * size)
         x, y = left + TILE * (tile // size) + TILE // 2, left + TILE * (tile % size) + TILE // 2
         if self.spawn_jitter:
             x, y = x + draws.below(4) - 2, y + draws.below(4) - 2
         start_x, start_y = (x - left) // TILE, (y - left) // TILE
         count = int(count_list[draws.below(len(count_list))]) if not self.endless else count_list[0]
-        lists = [opts["explosion_duration"], opts["explosion_delay"]]
-        if self.clue_phase:
-            lists = [opts["command_show_duration"], opts["command_show_delay"], *lists]
-        draws.reserve(count + sum(len(values) > 1 for values in lists))
+        if len(count_list) > 1:
+            draws.reserve(count + choices)
         if self.endless:  # uniform over the allowed commands, no validity filter (the targets wrap)
             commands = [draws.below(allowed) for _ in range(count)]
         else:  # a walk that stays inside the arena
@@ -428,9 +440,10 @@ class MortarMayhemCore(BatchedCore):
                 options = valid[cx][cy]
                 command = options[draws.below(len(options))]
                 commands.append(command)
-                cx, cy = cx + int(COMMAND_DX[command]), cy + int(COMMAND_DY[command])
+                dx, dy = COMMAND_DELTAS[command]
+                cx, cy = cx + dx, cy + dy
         picks = [int(values[draws.below(len(values))]) for values in lists]
-        draws.close()
+        self.half_word[k], self._rng_seen[k] = draws.close(), rng
         duration, delay = picks[:2] if self.clue_phase else (0, 0)
         lethal_steps, act_steps = picks[-2:]
 
@@ -454,7 +467,7 @@ class MortarMayhemCore(BatchedCore):
             self.move_key[k] = self._free_moves.key(config, x, y)
         self.pos[k] = x, y
         self.sprite[k] = 0
-        tx, ty = start_x + int(COMMAND_DX[commands[0]]), start_y + int(COMMAND_DY[commands[0]])
+        tx, ty = start_x + COMMAND_DELTAS[commands[0]][0], start_y + COMMAND_DELTAS[commands[0]][1]
         if self.endless:
             tx, ty = tx % size, ty % size
         self.target[k] = tx, ty
@@ -467,20 +480,22 @@ class MortarMayhemCore(BatchedCore):
         length = count * period
         self._ensure_stream(length)
         if self.clue_phase:
-            frames = np.arange(length)
-            self.stream[k, :length] = np.where(frames % period < duration, self.commands[k, frames // period], -1)
+            self.stream[k, :length] = [c for command in commands for c in [command] * duration + [-1] * delay]
         self.clue_pos[k] = 0
         self.clue_left[k] = max(length - 1, 0)  # the reset frame shows the stream's first frame
         self.stream_period[k], self.stream_duration[k] = max(period, 1), duration
         self.debug_lag[k] = 0
         self.fresh[k] = True
         if self.vector_observation:
-            self.vector[k] = 0.0
-            self.vector[k, 9 * np.arange(count) + ONE_HOT_INDEX[commands]] = 1.0
+            vector = self.vector[k]
+            vector[:] = 0.0
+            vector[[9 * c + ONE_HOT_INDEX[command] for c, command in enumerate(commands)]] = 1.0
         self.background[k] = self.backgrounds[self.background_index[size, 0, 0]]
-        one = np.array([k])
-        icon_slots = one if self.clue_phase else one[:0]
-        self._compose(one, one, self.pos[one], self.sprite[one] * 0, self.sheet_id[one], icon_slots)
+        self.frames[k] = self.background[k]
+        rows = self.frames_rows[k]
+        self._sheets[self.sheet_id[k]].paste_one(rows, y, x, 0)  # the new agent, facing up
+        if self.clue_phase and duration:
+            icon_sheet().paste_one(rows, ICON_CORNER, ICON_CORNER, commands[0])
 
     def _ensure_commands(self, count: int) -> None:
         if count > self.commands.shape[1]:
@@ -620,7 +635,9 @@ class MortarMayhemCore(BatchedCore):
         """Endless: after a round's last check, append one command and show only its icon; the tiles stay lethal."""
         count = int(self.num_commands[k])
         self._ensure_commands(count + 1)
-        command = BoundedDraws(self.rngs[k], 1).below(int(self.allowed[k]))
+        draws = BoundedDraws(self.rngs[k], 1, self.half_word[k])
+        command = draws.below(int(self.allowed[k]))
+        self.half_word[k] = draws.close()
         self.commands[k, count] = command
         self.num_commands[k] = count + 1
         self.current[k] = 0
