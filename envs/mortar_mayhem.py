@@ -151,15 +151,19 @@ def target_ring() -> tuple[Sprite, int]:
 
 
 @cache
-def valid_commands(size: int, allowed: int) -> tuple[tuple[tuple[int, ...], ...], ...]:
-    """For every tile (x, y): the allowed commands, in list order, that keep the walk inside the arena."""
-    return tuple(
-        tuple(
-            tuple(c for c, (dx, dy) in enumerate(COMMAND_DELTAS[:allowed]) if 0 <= x + dx < size and 0 <= y + dy < size)
-            for y in range(size)
-        )
-        for x in range(size)
-    )
+def command_walk(size: int, allowed: int) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
+    """For every tile ``x * size + y``: the allowed commands, in list order, that keep the walk inside the arena,
+    and the tile each of them leads to."""
+    steps = []
+    for x in range(size):
+        for y in range(size):
+            valid = [
+                c for c, (dx, dy) in enumerate(COMMAND_DELTAS[:allowed]) if 0 <= x + dx < size and 0 <= y + dy < size
+            ]
+            steps.append(
+                (tuple(valid), tuple((x + COMMAND_DELTAS[c][0]) * size + y + COMMAND_DELTAS[c][1] for c in valid))
+            )
+    return tuple(steps)
 
 
 # ------------------------------------------------------------------------------------------------- movement
@@ -370,12 +374,15 @@ class MortarMayhemCore(BatchedCore):
         self.stream_period = np.ones(n, i64)
         self.stream_duration = np.zeros(n, i64)
         self.debug_lag = np.zeros(n, i64)  # the debug icon runs one frame ahead in the streams between rounds
-        # the sprite drawn last (kept across resets, like the reference's cached sprite and rect)
+        # The reference caches the sprite (and rect) it drew last, and after a reset still shows it in the debug
+        # view and, in the endless variant, during the first clue stream. ``stale``: the slot shows that sprite
+        # (`drawn_*`, valid once anything was drawn) instead of its agent. It is set at reset and cleared by the
+        # first step that draws the agent.
         self.drawn_pos = np.zeros((n, 2), i64)
         self.drawn_sprite = np.zeros(n, i64)
         self.drawn_sheet = np.zeros(n, i64)
         self.drawn_valid = np.zeros(n, bool)
-        self.fresh = np.zeros(n, bool)  # reset, not stepped yet
+        self.stale = np.zeros(n, bool)
         # whether each slot's generator holds a leftover 32-bit half word (see BoundedDraws), and which generator
         self.half_word = [False] * n
         self._rng_seen: list[np.random.Generator | None] = [None] * n
@@ -434,19 +441,21 @@ class MortarMayhemCore(BatchedCore):
         if self.endless:  # uniform over the allowed commands, no validity filter (the targets wrap)
             commands = [draws.below(allowed) for _ in range(count)]
         else:  # a walk that stays inside the arena
-            valid = valid_commands(size, allowed)
-            commands, cx, cy = [], start_x, start_y
+            walk = command_walk(size, allowed)
+            commands, tile = [], start_x * size + start_y
             for _ in range(count):
-                options = valid[cx][cy]
-                command = options[draws.below(len(options))]
-                commands.append(command)
-                dx, dy = COMMAND_DELTAS[command]
-                cx, cy = cx + dx, cy + dy
+                valid, leads_to = walk[tile]
+                pick = draws.below(len(valid))
+                commands.append(valid[pick])
+                tile = leads_to[pick]
         picks = [int(values[draws.below(len(values))]) for values in lists]
         self.half_word[k], self._rng_seen[k] = draws.close(), rng
         duration, delay = picks[:2] if self.clue_phase else (0, 0)
         lethal_steps, act_steps = picks[-2:]
 
+        if not self.stale[k]:  # the sprite drawn last is this slot's agent: keep it for the quirks above
+            self.drawn_pos[k], self.drawn_sprite[k], self.drawn_sheet[k] = self.pos[k], self.sprite[k], self.sheet_id[k]
+        self.stale[k] = True
         self._ensure_commands(count)
         self.commands[k, :count] = commands
         self.num_commands[k], self.allowed[k] = count, allowed
@@ -485,7 +494,6 @@ class MortarMayhemCore(BatchedCore):
         self.clue_left[k] = max(length - 1, 0)  # the reset frame shows the stream's first frame
         self.stream_period[k], self.stream_duration[k] = max(period, 1), duration
         self.debug_lag[k] = 0
-        self.fresh[k] = True
         if self.vector_observation:
             vector = self.vector[k]
             vector[:] = 0.0
@@ -514,42 +522,44 @@ class MortarMayhemCore(BatchedCore):
     # ------------------------------------------------------------------------------------------------- step
     def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         slots = self._all[idx]
-        rewards = np.zeros(len(slots))
-        terminated = np.zeros(len(slots), dtype=bool)
-        if self.fresh[idx].any():
-            self._first_step(slots[self.fresh[idx]])
+        stale = self.stale[idx]
+        if stale.any():
+            self._first_step(slots[stale])
         clue_slots = slots[:0]
-        act_at: Index = slice(None)
-        act: Index = idx
         if self.clue_phase:
             clue = self.clue_left[idx] > 0
-            if clue.all():
-                clue_slots, act = slots, slots[:0]
-            elif clue.any():
-                clue_slots, act_at = slots[clue], np.flatnonzero(~clue)
-                act = slots[act_at]
-            if len(clue_slots):  # the next frame of the command stream; the agent is frozen, the action ignored
+            if clue.any():
+                clue_slots = slots if clue.all() else slots[clue]
+                # the next frame of the command stream; the agent is frozen and the action ignored
                 self.clue_pos[clue_slots] += 1
                 self.clue_left[clue_slots] -= 1
-        if not isinstance(act, np.ndarray) or len(act):
-            rewards[act_at], terminated[act_at] = self._act(act, actions[act_at])
+        if not len(clue_slots):
+            rewards, terminated = self._act(idx, actions)
+        else:
+            rewards, terminated = np.zeros(len(slots)), np.zeros(len(slots), dtype=bool)
+            if len(clue_slots) < len(slots):
+                act_at = np.flatnonzero(~clue)
+                rewards[act_at], terminated[act_at] = self._act(slots[act_at], actions[act_at])
         if self.endless:
             self.t[idx] += 1
             terminated |= self.t[idx] == self.max_steps[idx]
         drawn = slice(None) if isinstance(idx, slice) else slots
-        self._compose(
-            drawn, slots, self.drawn_pos[drawn], self.drawn_sprite[drawn], self.drawn_sheet[drawn], clue_slots
-        )
+        pos, sprite, sheet = self.pos[drawn], self.sprite[drawn], self.sheet_id[drawn]
+        stale = self.stale[drawn]
+        if stale.any():  # endless: the stream after a reset shows the sprite drawn last, from an earlier episode
+            pos, sprite, sheet = pos.copy(), sprite.copy(), sheet.copy()
+            ks = slots[stale]
+            pos[stale], sprite[stale], sheet[stale] = self.drawn_pos[ks], self.drawn_sprite[ks], self.drawn_sheet[ks]
+        self._compose(drawn, slots, pos, sprite, sheet, clue_slots)
         return rewards, terminated
 
     def _first_step(self, ks: np.ndarray) -> None:
-        """The first step after a reset: the drawn sprite becomes this episode's agent, except in the endless
-        variant's clue stream, where a sprite drawn before (in an earlier episode) stays."""
+        """The first step after a reset draws this episode's agent (facing up during a clue), except in the endless
+        variant's clue stream: the sprite drawn last (the previous episode's) stays there until the agent acts."""
         if self.endless:
             ks = ks[(self.clue_left[ks] == 0) | ~self.drawn_valid[ks]]
-        self.drawn_pos[ks], self.drawn_sprite[ks], self.drawn_sheet[ks] = self.pos[ks], 0, self.sheet_id[ks]
+        self.stale[ks] = False
         self.drawn_valid[ks] = True
-        self.fresh[ks] = False
 
     def _act(self, sel: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Move, then run the act phase. ``sel`` are slots outside the clue phase."""
@@ -567,7 +577,6 @@ class MortarMayhemCore(BatchedCore):
             sprite = np.where(turn < 0, self.sprite[sel], turn)
             tile_id = None
         self.pos[sel], self.sprite[sel] = pos, sprite
-        self.drawn_pos[sel], self.drawn_sprite[sel] = pos, sprite
 
         timer = self.timer[sel]
         event = timer == 0
@@ -684,10 +693,10 @@ class MortarMayhemCore(BatchedCore):
         frame = self.background[k].copy()
         rows = frame.reshape(1, SCREEN, SCREEN * 3)
         zero = np.zeros(1, dtype=np.int64)
-        if self.drawn_valid[k]:
+        if self.stale[k] and self.drawn_valid[k]:
             (x, y), sprite, sheet = self.drawn_pos[k], self.drawn_sprite[k], self.drawn_sheet[k]
         else:
-            (x, y), sprite, sheet = self.pos[k], 0, self.sheet_id[k]
+            (x, y), sprite, sheet = self.pos[k], self.sprite[k], self.sheet_id[k]
         self._sheets[sheet].paste(rows, zero, zero + y, zero + x, zero + sprite)
         if self.clue_left[k] > 0:  # the reference's render keeps its own copy of the stream (see the module doc)
             command = self.stream[k, self.clue_pos[k] + self.debug_lag[k]]
