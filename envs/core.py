@@ -50,30 +50,33 @@ class BoundedDraws:
     """``rng.integers(0, high)`` values (so also ``rng.choice`` of lists) one by one, from bulk draws of raw words.
 
     numpy draws a bounded int below ``high <= 2**32`` with Lemire's method on 32-bit words: one word, unless a
-    (very rare) rejection asks for another, and no word at all for ``high == 1``. A 32-bit word is the low half of
-    a fresh 64-bit output, or the high half left over (buffered in the bit generator) by the previous word.
-    Emulating that on 64-bit outputs drawn in bulk (``random_raw``) gives the same values and leaves the generator
-    in the same state as the scalar calls, at a fraction of their cost.
+    (very rare) rejection asks for another, and no word at all for ``high == 1``. Emulating that on words drawn in
+    bulk gives the same values and leaves the generator in the same state as the scalar calls, at a fraction of
+    their cost. ``reserve(n)`` draws n words at once: only reserve words that ``below`` will certainly use (each
+    call with ``high > 1`` uses at least one); if they run short (a rejection), more are drawn one by one.
 
-    ``buffered`` says whether the generator holds a leftover half word now (False right after seeding); read it
-    back afterwards to continue the generator later. ``reserve(n)`` draws n words at once: only reserve words that
-    ``below`` will certainly use (each call with ``high > 1`` uses at least one); if they run short (a rejection),
-    more are drawn word by word.
+    A 32-bit word is the low half of a fresh 64-bit output, or the high half that the previous word left over in
+    the bit generator. With ``fresh=True`` (a generator that has drawn nothing yet, so holds no leftover half) the
+    words come from 64-bit outputs (``random_raw``, the cheapest call), and the leftover half is tracked here;
+    otherwise numpy's own 32-bit bulk call draws them.
     """
 
-    __slots__ = ("rng", "words", "used", "buffered")
+    __slots__ = ("rng", "words", "used", "raw", "buffered")
 
-    def __init__(self, rng: np.random.Generator, reserve: int = 0, buffered: bool = False) -> None:
-        self.rng, self.words, self.used, self.buffered = rng, [], 0, buffered
+    def __init__(self, rng: np.random.Generator, reserve: int = 0, fresh: bool = False) -> None:
+        self.rng, self.words, self.used, self.raw, self.buffered = rng, [], 0, fresh, False
         self.reserve(reserve)
 
     def _word(self) -> int:
-        """One word through numpy itself, which keeps the leftover half in the bit generator."""
+        """One word through numpy itself, which keeps any leftover half in the bit generator."""
         self.buffered = not self.buffered
         return int(self.rng.integers(0, _WORD, dtype=np.uint32))
 
     def reserve(self, count: int) -> None:
         if count <= 0:
+            return
+        if not self.raw:
+            self.words += self.rng.integers(0, _WORD, size=count, dtype=np.uint32).tolist()
             return
         if self.buffered:
             self.words.append(self._word())
@@ -96,11 +99,10 @@ class BoundedDraws:
             if low_bits >= high or low_bits >= (_WORD - high) % high:
                 return product >> 32
 
-    def close(self) -> bool:
-        """Check that every reserved word was used (otherwise the generator ran ahead); return ``buffered``."""
+    def close(self) -> None:
+        """Check that every reserved word was used (otherwise the generator ran ahead of the reference)."""
         if self.used != len(self.words):
             raise RuntimeError(f"{len(self.words) - self.used} reserved random words were not used")
-        return self.buffered
 
 
 class BatchedCore:

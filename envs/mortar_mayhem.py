@@ -383,9 +383,7 @@ class MortarMayhemCore(BatchedCore):
         self.drawn_sheet = np.zeros(n, i64)
         self.drawn_valid = np.zeros(n, bool)
         self.stale = np.zeros(n, bool)
-        # whether each slot's generator holds a leftover 32-bit half word (see BoundedDraws), and which generator
-        self.half_word = [False] * n
-        self._rng_seen: list[np.random.Generator | None] = [None] * n
+        self._rng_seen: list[np.random.Generator | None] = [None] * n  # the generator of each slot's last reset
         self._sheets: list[SpriteSheet] = [agent_sheet(AGENT_SCALE)]
         self._sheet_scales: list[float] = [AGENT_SCALE]
         self._free_moves = FreeMoves()
@@ -428,8 +426,8 @@ class MortarMayhemCore(BatchedCore):
         words = 1 + 2 * self.spawn_jitter + (len(count_list) > 1)
         if len(count_list) == 1:
             words += count_list[0] + choices
-        buffered = self.half_word[k] and rng is self._rng_seen[k]  # a fresh generator holds no leftover half word
-        draws = BoundedDraws(rng, words, buffered)
+        draws = BoundedDraws(rng, words, fresh=rng is not self._rng_seen[k])  # a new generator has drawn nothing
+        self._rng_seen[k] = rng
         tile = draws.below(size * size)
         x, y = left + TILE * (tile // size) + TILE // 2, left + TILE * (tile % size) + TILE // 2
         if self.spawn_jitter:
@@ -449,7 +447,7 @@ class MortarMayhemCore(BatchedCore):
                 commands.append(valid[pick])
                 tile = leads_to[pick]
         picks = [int(values[draws.below(len(values))]) for values in lists]
-        self.half_word[k], self._rng_seen[k] = draws.close(), rng
+        draws.close()
         duration, delay = picks[:2] if self.clue_phase else (0, 0)
         lethal_steps, act_steps = picks[-2:]
 
@@ -644,9 +642,7 @@ class MortarMayhemCore(BatchedCore):
         """Endless: after a round's last check, append one command and show only its icon; the tiles stay lethal."""
         count = int(self.num_commands[k])
         self._ensure_commands(count + 1)
-        draws = BoundedDraws(self.rngs[k], 1, self.half_word[k])
-        command = draws.below(int(self.allowed[k]))
-        self.half_word[k] = draws.close()
+        command = BoundedDraws(self.rngs[k], 1).below(int(self.allowed[k]))
         self.commands[k, count] = command
         self.num_commands[k] = count + 1
         self.current[k] = 0
