@@ -305,7 +305,7 @@ class MemoryGymEnv(gym.Env):
         return self._obs(), float(rewards[0]), bool(terminated[0]), False, info
 
     def _obs(self) -> Any:
-        obs = self.core.observations(np.array([0]))
+        obs = self.core.observations()  # the only slot; a view, copied once (not gathered, then copied)
         if isinstance(obs, dict):
             return {key: v[0] for key, v in obs.items()}
         return obs[0]
