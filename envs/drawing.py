@@ -148,7 +148,7 @@ class SpriteSheet:
 
     def _window_view(self, frames: np.ndarray) -> np.ndarray:
         """Every (height x width) window of every frame, as a writeable strided view (no copy)."""
-        key = (frames.__array_interface__["data"][0], frames.shape, frames.strides)
+        key = (id(frames), frames.shape, frames.strides)  # the cached view keeps `frames` alive, so its id is unique
         view = self._windows.get(key)
         if view is None:
             n, h, w3 = frames.shape

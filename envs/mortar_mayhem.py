@@ -543,8 +543,8 @@ class MortarMayhemCore(BatchedCore):
             terminated |= self.t[idx] == self.max_steps[idx]
         drawn = slice(None) if isinstance(idx, slice) else slots
         pos, sprite, sheet = self.pos[drawn], self.sprite[drawn], self.sheet_id[drawn]
-        stale = self.stale[drawn]
-        if stale.any():  # endless: the stream after a reset shows the sprite drawn last, from an earlier episode
+        stale = self.stale[drawn] if self.endless else None  # only the endless clue keeps a stale sprite on screen
+        if stale is not None and stale.any():  # the stream after a reset shows the sprite of an earlier episode
             pos, sprite, sheet = pos.copy(), sprite.copy(), sheet.copy()
             ks = slots[stale]
             pos[stale], sprite[stale], sheet[stale] = self.drawn_pos[ks], self.drawn_sprite[ks], self.drawn_sheet[ks]
