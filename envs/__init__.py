@@ -28,6 +28,9 @@ ENV_IDS: dict[str, tuple[str, dict[str, Any]]] = {
         {"grid": True, "clue_phase": False, "vector_observation": True},
     ),
     "Endless-MortarMayhem-v0": ("envs.mortar_mayhem:MortarMayhemCore", {"endless": True, "spawn_jitter": True}),
+    "MysteryPath-v0": ("envs.mystery_path:MysteryPathCore", {}),
+    "MysteryPath-Grid-v0": ("envs.mystery_path:MysteryPathCore", {"grid": True}),
+    "Endless-MysteryPath-v0": ("envs.mystery_path:MysteryPathCore", {"endless": True}),
 }
 
 

@@ -22,7 +22,7 @@ KEY_BLUE = (0, 0, 255)
 
 AGENT_BODY = (250, 204, 153)
 AGENT_HAND_FILL = (250, 250, 250)
-AGENT_HAND = (50, 50, 50)  # the outline; at scale < 1/3 its width truncates to 0 and it fills the whole hand
+AGENT_HAND = (50, 50, 50)  # the hand outline; its width int(3 * scale) is 0 at scale 0.25, and width 0 means filled
 
 
 class Sprite:
@@ -89,7 +89,7 @@ def agent_sprites(scale: float = 0.25) -> tuple[Sprite, ...]:
     hands_dx = int(18 * scale)
     hand_dy = int(12 * scale)
     hand_radius = int(10 * scale)
-    hand_outline = int(3 * scale)  # 0 means "filled" to pygame
+    hand_outline = int(3 * scale)
     extension = 14
     dim = radius * 2 + hand_radius + extension
     centre = pygame.math.Vector2(dim // 2, dim // 2)
@@ -102,11 +102,10 @@ def agent_sprites(scale: float = 0.25) -> tuple[Sprite, ...]:
         surface = pygame.Surface((dim, dim))
         surface.fill(KEY_BLUE)
         pygame.draw.circle(surface, AGENT_BODY, centre, radius)
-        for hand in hands:
-            pos = (hand - centre).rotate(360 - heading) + centre
+        positions = [(hand - centre).rotate(360 - heading) + centre for hand in hands]
+        for pos in positions:
             pygame.draw.circle(surface, AGENT_HAND_FILL, pos, hand_radius)
-        for hand in hands:
-            pos = (hand - centre).rotate(360 - heading) + centre
+        for pos in positions:
             pygame.draw.circle(surface, AGENT_HAND, pos, hand_radius, hand_outline)
         sprites.append(surface_to_sprite(surface, KEY_BLUE))
     return tuple(sprites)

@@ -1,0 +1,937 @@
+"""The Mystery Path family: ``MysteryPath-v0``, ``MysteryPath-Grid-v0`` and ``Endless-MysteryPath-v0``.
+
+An invisible path of 12-px tiles leads across the screen. Stepping off it shows a red cross for one step, then the
+agent is put back on the path's first tile (the action of that step is ignored). Each path tile pays
+``reward_path_progress`` on its first visit.
+
+* ``MysteryPath-v0`` / ``-Grid-v0`` (``endless=False``): one 7x7 level (:mod:`envs.mystery_path_generator`) from an
+  origin on one border to a goal on the opposite one. Reaching the goal pays ``reward_goal`` and ends the episode;
+  ``max_steps`` ends it too. The free variant moves 3 px per step (MultiDiscrete([3, 3])), the grid variant turns and
+  steps one tile (Discrete(4)). The agent sees only itself (and, optionally, the origin and goal tiles).
+* ``Endless-MysteryPath-v0`` (``endless=True``): 7x7 segments joined left to right by a transition tile, generated
+  ahead of the agent. The camera follows the agent, which sees the path behind it but never ahead. Actions are
+  Discrete(4): 0 none, 1 right, 2 up, 3 down. The episode ends after ``stamina_level`` steps without reaching a fresh
+  tile, when the agent falls off behind its best column, or when it falls off twice at the same tile.
+
+State lives in arrays with a leading slot axis, and the rules read per-episode tables built at reset (rewards by
+tile kind, velocities by action, grid moves by state). Many slots are stepped with array operations; one or two
+slots (the single-environment face) with the same rules one slot at a time, because a numpy call costs microseconds
+whatever its size (tests keep both ways identical). Frames are drawn into a padded canvas (sprites near the edges
+need no clipping): the static Mystery Path background is copied and the sprites are scattered in with one fancy
+assignment per sprite kind; the scrolling Endless view is built band by band (every tile row of the screen consists
+of one "edge" pixel row pattern and one "middle" pattern). Endless segments are generated from the reference's
+random stream in the reference's order, but only when first needed (see ``MysteryPathCore._enter_segment``).
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from envs.core import BatchedCore, Index
+from envs.drawing import SCREEN, Sprite, agent_sprites, blend, pygame, round_half_away, surface_to_sprite
+from envs.movement import continuous_heading, continuous_velocity, grid_step
+from envs.mystery_path_generator import generate_path
+from envs.options import Option
+
+GRID = 7  # tiles per side of a level (and of an endless segment)
+TILE = SCREEN // GRID  # 12 px
+SEGMENT_COLUMNS = GRID + 1  # an endless segment plus its transition tile
+INITIAL_SEGMENTS = 3
+SCALAR_SLOTS = 2  # up to this many slots per step are stepped one by one (see MysteryPathCore._step)
+GRID_AGENT_SCALE = 0.25  # the grid variant ignores agent_scale
+
+ORIGIN_COLOUR = (0, 0, 255)
+GOAL_COLOUR = (0, 255, 0)
+PATH_COLOUR = (255, 255, 255)
+WALL_COLOUR = (255, 0, 0)
+CROSS_COLOUR = (255, 0, 0)
+TILE_BORDER = (210, 210, 210)
+ICE_COLOUR = (125, 177, 250)
+DEBUG_PATH_ALPHA = 200
+STAMINA_BAR_WIDTH = 4
+STAMINA_GREEN, STAMINA_RED = (0, 255, 0), (255, 0, 0)
+
+# Free movement: an action pair (horizontal, vertical) is coded as 3 * horizontal + vertical. Endless actions are
+# 0 none, 1 right, 2 up, 3 down. Heading -1 means "unchanged".
+FREE_ACTIONS = np.array([(h, v) for h in range(3) for v in range(3)], dtype=np.int64)
+ENDLESS_ACTIONS = np.array([[0, 0], [2, 0], [0, 1], [0, 2]], dtype=np.int64)
+FREE_HEADINGS = continuous_heading(FREE_ACTIONS, np.full(len(FREE_ACTIONS), -1))
+ENDLESS_HEADINGS = continuous_heading(ENDLESS_ACTIONS, np.full(len(ENDLESS_ACTIONS), -1))
+
+
+def _grid_transitions() -> np.ndarray:
+    """Grid movement as a table: state ``4 * tile + heading // 90`` and action -> next state (tile = 7 * x + y)."""
+    state = np.arange(GRID * GRID * 4)
+    tile, quarter = state // 4, state % 4
+    table = np.empty((len(state), 4), dtype=np.int64)
+    for action in range(4):
+        x, y, heading = grid_step(np.full(len(state), action), tile // GRID, tile % GRID, quarter * 90, GRID)
+        table[:, action] = (x * GRID + y) * 4 + heading // 90
+    return table
+
+
+GRID_NEXT = _grid_transitions()
+TILE_OF_PIXEL = (np.arange(SCREEN)[:, None] // TILE) * GRID + np.arange(SCREEN)[None, :] // TILE  # [x, y] -> tile
+TILE_CENTRES = np.array([(x * TILE + TILE // 2, y * TILE + TILE // 2) for x in range(GRID) for y in range(GRID)])
+
+# What a Mystery Path tile is for the agent; a visited NEW tile becomes PATH.
+OFF, PATH, NEW, GOAL = 0, 1, 2, 3
+AFTER_VISIT = np.array([OFF, PATH, PATH, GOAL], dtype=np.int64)
+# Endless path tiles: flags for "pays progress on the next visit" and "refills stamina on the next visit".
+NEW_TILE, REFILL = 1, 2
+
+# Endless ground truth: the direction from the current tile to the next path tile.
+DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.int64)  # east, north, south
+EAST, NORTH, SOUTH, WEST = 0, 1, 2, -1
+
+# The endless floor is drawn band by band: a band is one tile row of the screen, and all its pixel rows equal either
+# its "edge" row (first and last row of a tile) or its "middle" row. Bands are padded by one tile on both sides so
+# that tiles need no clipping.
+BAND_PAD = TILE
+BAND_WIDTH = SCREEN + 2 * BAND_PAD
+TILE_EDGE_BYTES = np.tile(np.array(TILE_BORDER, dtype=np.uint8), TILE)
+TILE_MIDDLE_BYTES = np.concatenate([TILE_BORDER, np.tile(PATH_COLOUR, TILE - 2), TILE_BORDER]).astype(np.uint8)
+TILE_BYTE_OFFSETS = np.arange(TILE * 3)
+PATH_TILE = np.empty((TILE, TILE, 3), dtype=np.uint8)  # a past-path tile: white with a grey 1-px border
+PATH_TILE[:] = TILE_BORDER
+PATH_TILE[1:-1, 1:-1] = PATH_COLOUR
+BLACK_FLOOR = TILE  # row of the background band tables below
+
+
+def _background_bands() -> tuple[np.ndarray, np.ndarray]:
+    """Edge and middle rows of the endless background: rows 0..11 ice scrolled by that many px, row 12 black."""
+    edge = np.zeros((TILE + 1, SCREEN, 3), dtype=np.uint8)
+    middle = np.zeros((TILE + 1, SCREEN, 3), dtype=np.uint8)
+    for phase in range(TILE):
+        local = (np.arange(SCREEN) + phase) % TILE
+        border = (local == 0) | (local == TILE - 1)
+        edge[phase] = TILE_BORDER
+        middle[phase] = np.where(border[:, None], TILE_BORDER, ICE_COLOUR)
+    return edge, middle
+
+
+BACKGROUND_EDGE, BACKGROUND_MIDDLE = _background_bands()
+
+
+def _stamina_bars() -> np.ndarray:
+    """The stamina bar for every red height 0..84: (85, 84, 4, 3)."""
+    bars = np.empty((SCREEN + 1, SCREEN, STAMINA_BAR_WIDTH, 3), dtype=np.uint8)
+    bars[:] = STAMINA_GREEN
+    for height in range(SCREEN + 1):
+        bars[height, :height] = STAMINA_RED
+    return bars
+
+
+STAMINA_BARS = _stamina_bars()
+
+
+def option_specs(grid: bool, endless: bool) -> dict[str, Option]:
+    """The reference's reset parameters of one variant, with their defaults and valid ranges."""
+    scale = Option(0.25, "float", 0.05, 1.0, doc="agent size (body radius int(25 * scale))")
+    if grid:
+        scale = Option(0.25, "float", 0.05, 1.0, doc="accepted but unused: the grid agent always has scale 0.25")
+    speed = Option(3.0, "float", 0.0, None, doc="pixels per step (cut to an int per axis)")
+    if endless:
+        return {
+            "max_steps": Option(-1, "int", doc="the episode ends when t == max_steps (<= 0: never)"),
+            "agent_scale": scale,
+            "agent_speed": speed,
+            "show_origin": Option(False, "bool", doc="has no effect (as in memory-gym)"),
+            "show_past_path": Option(True, "bool", doc="draw the path tiles behind the agent"),
+            "show_background": Option(False, "bool", doc="scrolling ice tiles instead of black"),
+            "show_stamina": Option(False, "bool", doc="stamina bar at the right edge"),
+            "visual_feedback": Option(True, "bool", doc="red cross on the agent when it falls off"),
+            "camera_offset_scale": Option(5.0, "float", 0.0, 5.5, doc="tiles visible behind the agent"),
+            "stamina_level": Option(20, "int", 1, None, doc="steps allowed without reaching a fresh tile"),
+            "reward_fall_off": Option(0.0, "float"),
+            "reward_path_progress": Option(0.1, "float", doc="first visit of each path tile"),
+            "reward_step": Option(0.0, "float"),
+        }
+    specs = {
+        "max_steps": Option(128 if grid else 512, "int", doc="the episode ends when t == max_steps"),
+        "agent_scale": scale,
+        "agent_speed": speed,
+        "cardinal_origin_choice": Option(
+            [0, 1, 2, 3], "int_list", 0, 3, doc="origin side, sampled: 0 left, 1 right, 2 top, 3 bottom"
+        ),
+        "show_origin": Option(False, "bool", doc="draw the origin tile (blue)"),
+        "show_goal": Option(False, "bool", doc="draw the goal tile (green)"),
+        "visual_feedback": Option(True, "bool", doc="red cross on the agent while it is off the path"),
+        "reward_goal": Option(1.0, "float"),
+        "reward_fall_off": Option(0.0, "float"),
+        "reward_path_progress": Option(0.0 if grid else 0.1, "float", doc="first visit of each inner path tile"),
+        "reward_step": Option(0.0, "float"),
+    }
+    if grid:
+        del specs["agent_speed"]
+    return specs
+
+
+# ------------------------------------------------------------------------------------------------------- sprites
+@cache
+def fall_off_cross() -> Sprite:
+    """The red 10x10 cross (two 3-px diagonals) shown where the agent fell off."""
+    size, width = int(40 * 0.25), int(12 * 0.25)
+    surface = pygame.Surface((size, size))
+    surface.fill((0, 0, 0))
+    pygame.draw.line(surface, CROSS_COLOUR, (0, 0), (size - 1, size - 1), width)
+    pygame.draw.line(surface, CROSS_COLOUR, (size - 1, 0), (0, size - 1), width)
+    return surface_to_sprite(surface, (0, 0, 0))
+
+
+@cache
+def _ice_background(phase: int) -> np.ndarray:
+    """The endless view's ice floor scrolled by ``phase`` px (0..11) to the left, as a whole picture."""
+    band = np.empty((TILE, SCREEN, 3), dtype=np.uint8)
+    band[:] = BACKGROUND_MIDDLE[phase]
+    band[0] = band[TILE - 1] = BACKGROUND_EDGE[phase]
+    return np.tile(band, (GRID, 1, 1))
+
+
+# -------------------------------------------------------------------------------------------------- canvas
+class _SpriteSheet:
+    """Sprites of one role (agent headings, the cross) as padded byte-offset tables, for one-scatter pasting."""
+
+    def __init__(self) -> None:
+        self.sprites: list[Sprite] = []
+        self.heights = np.zeros(0, dtype=np.int64)
+        self.widths = np.zeros(0, dtype=np.int64)
+        self.offsets = np.zeros((0, 0), dtype=np.int64)
+        self.colours = np.zeros((0, 0), dtype=np.uint8)
+        self._row_bytes = -1
+
+    def add(self, sprites: tuple[Sprite, ...]) -> int:
+        """Register ``sprites`` (consecutive ids) and return the id of the first; known sprites are reused."""
+        for i in range(len(self.sprites) - len(sprites) + 1):
+            if all(a is b for a, b in zip(self.sprites[i : i + len(sprites)], sprites, strict=False)):
+                return i
+        self.sprites.extend(sprites)
+        self.heights = np.array([s.height for s in self.sprites], dtype=np.int64)
+        self.widths = np.array([s.width for s in self.sprites], dtype=np.int64)
+        self._row_bytes = -1
+        return len(self.sprites) - len(sprites)
+
+    def tables(self, row_bytes: int) -> tuple[np.ndarray, np.ndarray]:
+        """Byte offsets (relative to the top-left pixel) and byte values of every opaque pixel, padded per sprite."""
+        if row_bytes != self._row_bytes:
+            pixels = [np.argwhere(s.mask) for s in self.sprites]
+            most = max(len(p) for p in pixels)
+            offsets = np.zeros((len(self.sprites), most * 3), dtype=np.int64)
+            colours = np.zeros((len(self.sprites), most * 3), dtype=np.uint8)
+            for i, (sprite, p) in enumerate(zip(self.sprites, pixels, strict=True)):
+                p = np.concatenate([p, np.repeat(p[:1], most - len(p), axis=0)])  # repeats write the same value
+                offsets[i] = ((p[:, 0] * row_bytes + p[:, 1] * 3)[:, None] + np.arange(3)).ravel()
+                colours[i] = sprite.rgb[p[:, 0], p[:, 1]].ravel()
+            self.offsets, self.colours, self._row_bytes = offsets, colours, row_bytes
+        return self.offsets, self.colours
+
+
+class _Canvas:
+    """The frames of all slots, with a margin around each so that sprites can be pasted without clipping."""
+
+    def __init__(self, num_envs: int) -> None:
+        self.num_envs = num_envs
+        self._allocate(0)
+
+    def _allocate(self, margin: int) -> None:
+        self.margin = margin
+        side = SCREEN + 2 * margin
+        self.buffer = np.zeros((self.num_envs, side, side, 3), dtype=np.uint8)
+        self.flat = self.buffer.reshape(-1)
+        self.view = self.buffer[:, margin : margin + SCREEN, margin : margin + SCREEN]
+        # The same pixels split into tile bands: (slot, band, row in band, column, channel).
+        self.bands = self.view.reshape(self.num_envs, GRID, TILE, SCREEN, 3)
+        assert np.shares_memory(self.bands, self.buffer)
+        self.row_bytes = side * 3
+        # Byte position of each slot's visible top-left pixel.
+        self.origin = np.arange(self.num_envs) * (side * side * 3) + margin * (self.row_bytes + 3)
+
+    def fit(self, sheet: _SpriteSheet) -> None:
+        """Grow the margin (keeping the frames) until every sprite of ``sheet`` fits into it."""
+        need = int(max(sheet.heights.max(initial=0), sheet.widths.max(initial=0)))
+        if need > self.margin:
+            frames = self.view.copy()
+            self._allocate(need)
+            self.view[:] = frames
+
+    def paste(
+        self,
+        sheet: _SpriteSheet,
+        slots: np.ndarray,
+        ids: np.ndarray,
+        top: np.ndarray,
+        left: np.ndarray,
+        may_leave_screen: bool = False,
+    ) -> None:
+        """Paste sprite ``ids[i]`` of ``sheet`` into slot ``slots[i]`` with its top-left at (top[i], left[i]).
+
+        Sprites at least partly on the screen need no clipping (the margin is as wide as the largest sprite).
+        ``may_leave_screen`` moves sprites that are entirely off the screen into the margin.
+        """
+        offsets, colours = sheet.tables(self.row_bytes)
+        if may_leave_screen:
+            m = self.margin
+            top = np.minimum(np.maximum(top, -m), SCREEN + m - sheet.heights[ids])
+            left = np.minimum(np.maximum(left, -m), SCREEN + m - sheet.widths[ids])
+        base = self.origin[slots] + top * self.row_bytes + left * 3
+        self.flat[base[:, None] + offsets[ids]] = colours[ids]
+
+
+# ---------------------------------------------------------------------------------------------------- core
+class MysteryPathCore(BatchedCore):
+    """All three Mystery Path variants: ``grid`` selects grid movement, ``endless`` the side-scrolling endless path."""
+
+    def __init__(
+        self, num_envs: int = 1, options: dict[str, Any] | None = None, grid: bool = False, endless: bool = False
+    ) -> None:
+        if grid and endless:
+            raise ValueError("Endless-MysteryPath has no grid variant (grid=True with endless=True)")
+        self.grid, self.endless = bool(grid), bool(endless)
+        self.env_name = "Endless-MysteryPath-v0" if endless else ("MysteryPath-Grid-v0" if grid else "MysteryPath-v0")
+        self.option_specs = option_specs(self.grid, self.endless)
+        self.single_observation_space = gym.spaces.Box(0, 255, (SCREEN, SCREEN, 3), np.uint8)
+        self.single_action_space = gym.spaces.Discrete(4) if grid or endless else gym.spaces.MultiDiscrete([3, 3])
+        self.base_render_fps = 3 if grid else 25
+        if endless:
+            self.has_ground_truth_info = True
+            self.ground_truth_space = gym.spaces.Box(0.0, 1.0, (3,), np.float32)
+        super().__init__(num_envs, options)
+        n = self.num_envs
+        self.all_slots = np.arange(n)
+        # Agent: centre pixel (x, y) (world coordinates in the endless variant), heading, and where a fall-off puts
+        # it back (the free agent is placed `radius` px into the first tile: its centre only with the default scale).
+        self.pos = np.zeros((n, 2), dtype=np.int64)
+        self.return_pos = np.zeros((n, 2), dtype=np.int64)
+        self.heading = np.zeros(n, dtype=np.int64)
+        self.velocity = np.zeros((n, len(ENDLESS_ACTIONS if endless else FREE_ACTIONS), 2), dtype=np.int64)
+        self.off_path = np.zeros(n, dtype=bool)  # fell off in the last step: goes back this step
+        self.cross_visible = np.zeros(n, dtype=bool)
+        self.t = np.zeros(n, dtype=np.int64)
+        self.num_fails = np.zeros(n, dtype=np.int64)
+        self.max_steps = np.zeros(n, dtype=np.int64)
+        self.visual_feedback = np.zeros(n, dtype=bool)
+        self.reward_table = np.zeros((n, 4), dtype=np.float64)  # reward of a step, by what the agent stepped on
+        # Drawing.
+        self.agents = _SpriteSheet()
+        self.crosses = _SpriteSheet()
+        self.cross_id = self.crosses.add((fall_off_cross(),))
+        self.sprite0 = np.zeros(n, dtype=np.int64)  # sprite id of heading 0 at the slot's agent scale
+        self.half = np.zeros(n, dtype=np.int64)  # sprite side // 2: top-left = centre - half
+        self.canvas = _Canvas(n)
+        self.canvas.fit(self.crosses)
+        if endless:
+            self._init_endless(n)
+        else:
+            self._init_level(n)
+
+    def _init_level(self, n: int) -> None:
+        self.status = np.zeros((n, GRID * GRID), dtype=np.int64)  # OFF / PATH / NEW / GOAL per tile 7 * x + y
+        self.success = np.zeros(n, dtype=np.int64)
+        self.background = np.zeros((n, SCREEN, SCREEN, 3), dtype=np.uint8)
+        self.levels: list[Any] = [None] * n  # (origin, goal, layout) per slot, for the debug view
+        self.pos_low = np.zeros((n, 1), dtype=np.int64)  # free agent: the centre stays `radius` px inside the screen
+        self.pos_high = np.zeros((n, 1), dtype=np.int64)
+        self.grid_state = np.zeros(n, dtype=np.int64)  # grid agent: 4 * tile + heading // 90
+        self.origin_state = np.zeros(n, dtype=np.int64)  # 4 * origin tile
+
+    def _init_endless(self, n: int) -> None:
+        # The path as one chain of tiles (origin first), grown segment by segment; capacities grow on demand.
+        capacity = 64
+        self.chain_x = np.zeros((n, capacity), dtype=np.int64)
+        self.chain_y = np.zeros((n, capacity), dtype=np.int64)
+        self.direction = np.full((n, capacity), WEST, dtype=np.int64)  # from chain tile i to tile i + 1
+        self.flags = np.zeros((n, capacity), dtype=np.int64)  # NEW_TILE | REFILL
+        self.walk_start = np.zeros((n, capacity), dtype=np.int64)  # first tile drawn behind an agent on tile i
+        self.chain_lists: list[tuple[list[int], list[int]]] = [([], []) for _ in range(n)]
+        # tile_node[slot, x, y + 1]: chain index of a path tile or -1; rows 0 and 8 catch agents above and below.
+        self.tile_node = np.full((n, (INITIAL_SEGMENTS + 1) * SEGMENT_COLUMNS, GRID + 2), -1, dtype=np.int64)
+        self.num_segments = np.zeros(n, dtype=np.int64)
+        self.reference_segments = np.zeros(n, dtype=np.int64)  # segments the reference has built by now
+        self.segment_rng: list[np.random.Generator | None] = [None] * n  # the generator that builds them
+        self.segment_ends: list[list[int]] = [[] for _ in range(n)]  # chain length after each segment
+        self.walks_until = np.zeros(n, dtype=np.int64)  # walk_start is known for the chain tiles before this
+        self.prepare_at = np.zeros(n, dtype=np.int64)  # x pixel of the next segment (see _enter_segment)
+        self.last_goal_y = np.zeros(n, dtype=np.int64)
+        self.current_node = np.zeros(n, dtype=np.int64)
+        self.draw_from = np.zeros(n, dtype=np.int64)  # past path: chain tiles draw_from .. current_node - 1
+        self.ground_truth = np.zeros(n, dtype=np.int64)  # index into DIRECTIONS
+        self.stamina = np.zeros(n, dtype=np.int64)
+        self.stamina_level = np.zeros(n, dtype=np.int64)
+        self.max_x = np.zeros(n, dtype=np.int64)
+        self.tiles_visited = np.zeros(n, dtype=np.int64)
+        self.fall_off_tiles: list[set[tuple[int, int]]] = [set() for _ in range(n)]
+        self.camera_x = np.zeros(n, dtype=np.float64)
+        self.camera_offset = np.zeros(n, dtype=np.float64)
+        self.bg_scroll = np.zeros(n, dtype=np.float64)
+        self.agent_screen_left = np.zeros(n, dtype=np.int64)
+        self.depth = np.zeros(n, dtype=np.int64)  # columns of past path drawn behind the agent's column
+        self.show_past_path = np.zeros(n, dtype=bool)
+        self.show_background = np.zeros(n, dtype=bool)
+        self.show_stamina = np.zeros(n, dtype=bool)
+
+    # ------------------------------------------------------------------------------------------- reset
+    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
+        scale = GRID_AGENT_SCALE if self.grid else opts["agent_scale"]
+        first = self.agents.add(agent_sprites(scale))
+        self.canvas.fit(self.agents)
+        self.sprite0[k] = first
+        self.half[k] = self.agents.sprites[first].width // 2
+        radius = int(25 * scale)
+        if not self.grid:
+            self.velocity[k] = _velocities(self.endless, float(opts["agent_speed"]))
+        self.t[k] = 0
+        self.max_steps[k] = opts["max_steps"]
+        self.num_fails[k] = 0
+        self.off_path[k] = False
+        self.cross_visible[k] = False
+        self.visual_feedback[k] = opts["visual_feedback"]
+        if self.endless:
+            self._reset_endless(k, rng, opts, radius)
+        else:
+            self._reset_level(k, rng, opts, radius)
+        self._draw_slot(k)
+
+    def _reset_level(self, k: int, rng: np.random.Generator, opts: dict[str, Any], radius: int) -> None:
+        choice = opts["cardinal_origin_choice"]
+        side = choice[int(rng.integers(0, len(choice)))]
+        first, second = int(rng.integers(0, GRID)), int(rng.integers(0, GRID))
+        last = GRID - 1
+        origin, goal = {
+            0: ((0, first), (last, second)),
+            1: ((last, first), (0, second)),
+            2: ((first, 0), (second, last)),
+            3: ((first, last), (second, 0)),
+        }[side]
+        layout = generate_path(rng, GRID, GRID, origin, goal)
+        self.levels[k] = (origin, goal, layout)
+        status = self.status[k]
+        status[:] = OFF
+        for x, y in layout.path[1:-1]:
+            status[x * GRID + y] = NEW
+        status[origin[0] * GRID + origin[1]] = PATH
+        status[goal[0] * GRID + goal[1]] = GOAL
+        # Rewards are summed in the reference's order: 0, then the event's reward, then the step reward.
+        step = opts["reward_step"]
+        self.reward_table[k, OFF] = (0 + opts["reward_fall_off"]) + step
+        self.reward_table[k, PATH] = 0 + step
+        self.reward_table[k, NEW] = (0 + opts["reward_path_progress"]) + step
+        self.reward_table[k, GOAL] = (0 + opts["reward_goal"]) + step
+        self.success[k] = 0
+        self.heading[k] = 0
+        if self.grid:
+            self.origin_state[k] = (origin[0] * GRID + origin[1]) * 4
+            self.grid_state[k] = self.origin_state[k]  # heading up
+            self.pos[k] = TILE_CENTRES[origin[0] * GRID + origin[1]]
+        else:
+            self.return_pos[k] = (origin[0] * TILE + radius, origin[1] * TILE + radius)
+            self.pos[k] = self.return_pos[k]
+            self.pos_low[k], self.pos_high[k] = radius, SCREEN - radius
+        background = self.background[k]
+        background[:] = 0
+        if opts["show_origin"]:
+            _fill_tile(background, origin, ORIGIN_COLOUR)
+        if opts["show_goal"]:
+            _fill_tile(background, goal, GOAL_COLOUR)
+
+    def _reset_endless(self, k: int, rng: np.random.Generator, opts: dict[str, Any], radius: int) -> None:
+        self.depth[k] = int(opts["camera_offset_scale"])
+        self.show_past_path[k] = opts["show_past_path"]
+        self.show_background[k] = opts["show_background"]
+        self.show_stamina[k] = opts["show_stamina"]
+        if self.segment_rng[k] is rng:  # the generator continues: first make the last episode's remaining draws
+            self._catch_up(k)
+        self.segment_rng[k] = rng
+        self.chain_lists[k] = ([], [])
+        self.segment_ends[k] = []
+        self.num_segments[k] = 0
+        self.reference_segments[k] = INITIAL_SEGMENTS
+        self.walks_until[k] = 0
+        self.tile_node[k] = -1
+        self._add_segment(k, rng)
+        self._enter_segment(k, 0)
+        self.flags[k, 0] &= ~NEW_TILE  # the very first tile pays nothing
+        self.current_node[k] = 0
+        self.draw_from[k] = 0
+        self.ground_truth[k] = self.direction[k, 0]  # never west: the first tile is in column 0
+        self.heading[k] = 270  # facing right
+        self.return_pos[k] = (self.chain_x[k, 0] * TILE + radius, self.chain_y[k, 0] * TILE + radius)
+        self.pos[k] = self.return_pos[k]
+        step = opts["reward_step"]
+        self.reward_table[k, 0] = 0 + step  # index: 1 for a new tile + 2 for a fall-off
+        self.reward_table[k, 1] = (0 + opts["reward_path_progress"]) + step
+        self.reward_table[k, 2:] = (0 + opts["reward_fall_off"]) + step
+        self.stamina_level[k] = self.stamina[k] = opts["stamina_level"]
+        self.max_x[k] = 0
+        self.tiles_visited[k] = 0
+        self.fall_off_tiles[k] = set()
+        self.camera_offset[k] = -TILE * opts["camera_offset_scale"]
+        self.camera_x[k] = self.camera_offset[k]
+        self.bg_scroll[k] = 0.0
+        # The agent is always drawn at the same screen column: its start column minus the camera offset.
+        self.agent_screen_left[k] = int(self.return_pos[k, 0] - self.half[k] - self.camera_offset[k])
+
+    def _add_segment(self, k: int, rng: np.random.Generator) -> None:
+        """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile."""
+        segment = int(self.num_segments[k])
+        start_y = int(rng.integers(0, GRID)) if segment == 0 else int(self.last_goal_y[k])
+        goal_y = int(rng.integers(0, GRID))
+        layout = generate_path(rng, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
+        shift = segment * SEGMENT_COLUMNS
+        xs, ys = self.chain_lists[k]
+        begin = len(xs)
+        xs += [x + shift for x, _ in layout.path] + [shift + GRID]
+        ys += [y for _, y in layout.path] + [goal_y]
+        end = len(xs)
+        self._reserve(end, (segment + 2) * SEGMENT_COLUMNS)
+        tiles = np.array([xs[begin:end], ys[begin:end]])
+        self.chain_x[k, begin:end] = tiles[0]
+        self.chain_y[k, begin:end] = tiles[1]
+        first = max(begin - 1, 0)  # the previous segment's last tile gets its direction now
+        directions = [_direction(xs[i], ys[i], xs[i + 1], ys[i + 1]) for i in range(first, end - 1)]
+        self.direction[k, first : end - 1] = directions
+        self.direction[k, end - 1] = EAST  # the next segment starts right of the transition tile
+        self.flags[k, begin:end] = NEW_TILE | REFILL
+        self.tile_node[k, tiles[0], tiles[1] + 1] = range(begin, end)
+        self.segment_ends[k].append(end)
+        self.num_segments[k] = segment + 1
+        self.last_goal_y[k] = goal_y
+
+    def _enter_segment(self, k: int, segment: int) -> None:
+        """Prepare segment ``segment`` for an agent entering it, and compute where the past path starts for each of
+        its tiles (not random, so it is only done for segments that the agent reaches).
+
+        The reference builds three segments at reset and one more whenever the agent enters the last one. Here only
+        the first is built at reset; entering the second builds every segment that the reference has built by then,
+        in the same order from the same generator, so levels and random streams are the same. An episode that never
+        leaves the first segment (most short ones) then costs one level instead of three, unless the next reset
+        continues the generator: then :meth:`_catch_up` makes the missing draws first.
+        """
+        while segment > self.reference_segments[k] - 2:
+            self.reference_segments[k] += 1
+        if segment > 0:
+            self._catch_up(k)
+        begin, end = int(self.walks_until[k]), self.segment_ends[k][segment]
+        if end > begin:
+            xs = self.chain_lists[k][0]
+            self.walk_start[k, begin:end] = [self._walk_start(k, i, xs[i] - 1) for i in range(begin, end)]
+            self.walks_until[k] = end
+        self.prepare_at[k] = (segment + 1) * SEGMENT_COLUMNS * TILE
+
+    def _catch_up(self, k: int) -> None:
+        """Build the segments that the reference has built by now but this slot has not yet (see _enter_segment)."""
+        while self.num_segments[k] < self.reference_segments[k]:
+            self._add_segment(k, self.segment_rng[k])
+
+    def path_tiles(self, k: int) -> tuple[list[int], list[int]]:
+        """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""
+        self._catch_up(k)
+        return self.chain_lists[k]
+
+    def _walk_start(self, k: int, node: int, column: int) -> int:
+        """First chain tile of the past path drawn behind an agent in ``column + 1`` whose last path tile is ``node``.
+
+        The walk goes back from the tile before ``node`` and stops after the first tile whose column is at most
+        ``max(0, column - depth)``, or at the first tile of the path. Nothing is drawn when ``column < 0``.
+        """
+        if column < 0 or not self.show_past_path[k]:
+            return node
+        xs = self.chain_lists[k][0]
+        last = max(0, column - int(self.depth[k]))
+        i = node - 1
+        while i > 0 and xs[i] > last:
+            i -= 1
+        return max(i, 0)
+
+    def _reserve(self, length: int, columns: int) -> None:
+        """Grow the chain and tile arrays of all slots so that they hold ``length`` tiles and ``columns`` columns."""
+        capacity = self.chain_x.shape[1]
+        if length > capacity:
+            extra = max(length, 2 * capacity) - capacity
+            for name, fill in (("chain_x", 0), ("chain_y", 0), ("direction", WEST), ("flags", 0), ("walk_start", 0)):
+                old = getattr(self, name)
+                setattr(self, name, np.concatenate([old, np.full((old.shape[0], extra), fill, old.dtype)], axis=1))
+        if columns > self.tile_node.shape[1]:
+            extra = max(columns, 2 * self.tile_node.shape[1]) - self.tile_node.shape[1]
+            pad = np.full((self.num_envs, extra, GRID + 2), -1, dtype=np.int64)
+            self.tile_node = np.concatenate([self.tile_node, pad], axis=1)
+
+    # -------------------------------------------------------------------------------------------- step
+    def _slots_of(self, idx: Index) -> np.ndarray:
+        return self.all_slots if isinstance(idx, slice) else idx
+
+    def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        slots = self._slots_of(idx)
+        if len(slots) <= SCALAR_SLOTS:
+            # A numpy call costs microseconds whatever its size, so a few slots are stepped one by one with the
+            # same rules on the same state (tests check that both ways agree step for step).
+            actions = actions.reshape(len(slots), -1).tolist()
+            rewards = np.empty(len(slots), dtype=np.float64)
+            terminated = np.empty(len(slots), dtype=bool)
+            step_slot = self._step_endless_slot if self.endless else self._step_level_slot
+            for i, k in enumerate(slots.tolist()):
+                rewards[i], terminated[i] = step_slot(k, actions[i])
+                self._draw_slot(k)
+            return rewards, terminated
+        if self.endless:
+            rewards, terminated = self._step_endless(idx, slots, actions.reshape(-1))
+        else:
+            rewards, terminated = self._step_level(idx, slots, actions)
+        self._draw(idx)
+        return rewards, terminated
+
+    def _step_level_slot(self, k: int, action: list[int]) -> tuple[float, bool]:
+        """One Mystery Path step of slot ``k`` (the rules of :meth:`_step_level`, one slot at a time)."""
+        back = self.off_path[k]
+        if self.grid:
+            state = int(self.grid_state[k])
+            state = int(self.origin_state[k]) | (state & 3) if back else int(GRID_NEXT[state, action[0]])
+            self.grid_state[k] = state
+            self.heading[k] = (state & 3) * 90
+            tile = state >> 2
+            self.pos[k] = TILE_CENTRES[tile]
+        else:
+            code = 0 if back else action[0] * 3 + action[1]
+            x, y = (self.return_pos if back else self.pos)[k].tolist()
+            vx, vy = self.velocity[k, code].tolist()
+            low, high = int(self.pos_low[k, 0]), int(self.pos_high[k, 0])
+            x, y = max(min(x + vx, high), low), max(min(y + vy, high), low)
+            self.pos[k] = x, y
+            turn = FREE_HEADINGS[code]
+            if turn >= 0:
+                self.heading[k] = turn
+            tile = (x // TILE) * GRID + y // TILE
+        status = int(self.status[k, tile])
+        self.status[k, tile] = AFTER_VISIT[status]
+        fell, goal = status == OFF, status == GOAL
+        self.num_fails[k] += fell
+        self.off_path[k] = fell
+        self.cross_visible[k] = fell and self.visual_feedback[k]
+        self.success[k] = goal
+        self.t[k] += 1
+        return self.reward_table[k, status], goal or self.t[k] == self.max_steps[k]
+
+    def _step_endless_slot(self, k: int, action: list[int]) -> tuple[float, bool]:
+        """One Endless Mystery Path step of slot ``k`` (the rules of :meth:`_step_endless`, one slot at a time)."""
+        if self.off_path[k]:
+            x, y = self.return_pos[k].tolist()
+            self.camera_x[k] = self.camera_offset[k]
+            self.bg_scroll[k] = 0.0
+        else:
+            vx, vy = self.velocity[k, action[0]].tolist()
+            x, y = self.pos[k].tolist()
+            x, y = x + vx, y + vy
+            turn = ENDLESS_HEADINGS[action[0]]
+            if turn >= 0:
+                self.heading[k] = turn
+            self.camera_x[k] += vx
+            scroll = self.bg_scroll[k] - vx
+            if abs(scroll) >= TILE:
+                scroll = abs(scroll) % abs(vx) * np.sign(scroll)
+            self.bg_scroll[k] = scroll
+        self.pos[k] = x, y
+        tx, ty = x // TILE, y // TILE
+        if x >= self.prepare_at[k]:
+            self._enter_segment(k, tx // SEGMENT_COLUMNS)
+        node = int(self.tile_node[k, tx, min(max(ty, -1), GRID) + 1])
+        on_path = node >= 0
+        if on_path:
+            self.current_node[k] = node
+        else:
+            node = int(self.current_node[k])
+        flags = int(self.flags[k, node])
+        if on_path:
+            self.flags[k, node] = 0  # a visited tile pays and refills only once
+        new_tile = flags & NEW_TILE
+        reward = self.reward_table[k, new_tile + 2 * (not on_path)]
+        self.tiles_visited[k] += new_tile
+        stamina = (self.stamina_level[k] if flags >= REFILL or not on_path else self.stamina[k]) - 1
+        self.stamina[k] = stamina
+        self.t[k] += 1
+        terminated = stamina == 0 or self.t[k] == self.max_steps[k]
+        self.draw_from[k] = self.walk_start[k, node]
+        if not on_path:
+            terminated = self._fall_off(k, tx, ty, node) or terminated
+        self.off_path[k] = not on_path
+        self.cross_visible[k] = not on_path and self.visual_feedback[k]
+        direction = self.direction[k, node]
+        if direction != WEST:
+            self.ground_truth[k] = direction
+        if on_path and tx > self.max_x[k]:
+            self.max_x[k] = tx
+        return reward, bool(terminated)
+
+    def _fall_off(self, k: int, column: int, row: int, node: int) -> bool:
+        """Endless fall-off bookkeeping of slot ``k`` at tile (column, row); True if it ends the episode.
+
+        Falling off behind the best column, or twice at the same tile, ends the episode. (The tiles are meant to be
+        forgotten on reaching a new best column, but the reference never does.) Every tile refills stamina again.
+        """
+        self.num_fails[k] += 1
+        tile, seen = (column, row), self.fall_off_tiles[k]
+        ends = column < self.max_x[k] or tile in seen
+        if not ends:
+            seen.add(tile)
+        self.flags[k, : len(self.chain_lists[k][0])] |= REFILL
+        self.draw_from[k] = self._walk_start(k, node, column - 1)
+        return ends
+
+    def _step_level(self, idx: Index, slots: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        back = self.off_path[idx]  # fell off last step: back to the origin, the action is ignored
+        if self.grid:
+            state = self.grid_state[idx]
+            moved = GRID_NEXT[state, actions.reshape(-1)]
+            state = np.where(back, self.origin_state[idx] | (state & 3), moved)
+            self.grid_state[idx] = state
+            self.heading[idx] = (state & 3) * 90
+            tile = state >> 2
+            self.pos[idx] = TILE_CENTRES[tile]
+        else:
+            actions = actions.reshape(-1, 2)
+            code = np.where(back, 0, actions[:, 0] * 3 + actions[:, 1])
+            pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
+            pos += self.velocity[slots, code]
+            np.minimum(pos, self.pos_high[idx], out=pos)  # the upper bound first, as in the reference
+            np.maximum(pos, self.pos_low[idx], out=pos)
+            self.pos[idx] = pos
+            turn = FREE_HEADINGS[code]
+            self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
+            tile = TILE_OF_PIXEL[pos[:, 0], pos[:, 1]]
+        status = self.status[slots, tile]
+        self.status[slots, tile] = AFTER_VISIT[status]
+        rewards = self.reward_table[slots, status]
+        fell = status == OFF
+        goal = status == GOAL
+        self.num_fails[idx] += fell
+        self.off_path[idx] = fell
+        self.cross_visible[idx] = fell & self.visual_feedback[idx]
+        self.success[idx] = goal
+        self.t[idx] += 1
+        return rewards, goal | (self.t[idx] == self.max_steps[idx])
+
+    def _step_endless(self, idx: Index, slots: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        back = self.off_path[idx]  # fell off last step: back to the first tile, camera reset, action ignored
+        code = np.where(back, 0, actions)
+        velocity = self.velocity[slots, code]
+        pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
+        pos += velocity
+        self.pos[idx] = pos
+        turn = ENDLESS_HEADINGS[code]
+        self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
+        # The camera follows the agent horizontally; the background scrolls the other way and wraps.
+        vx = velocity[:, 0]
+        self.camera_x[idx] = np.where(back, self.camera_offset[idx], self.camera_x[idx] + vx)
+        scroll = np.where(back, 0.0, self.bg_scroll[idx] - vx)
+        wrap = np.abs(scroll) >= TILE
+        if wrap.any():
+            scroll = np.where(wrap, np.abs(scroll) % np.where(vx != 0, np.abs(vx), 1) * np.sign(scroll), scroll)
+        self.bg_scroll[idx] = scroll
+
+        px = pos[:, 0]
+        tx = px // TILE
+        ahead = px >= self.prepare_at[idx]
+        if ahead.any():
+            for k, column in zip(slots[ahead].tolist(), tx[ahead].tolist(), strict=True):
+                self._enter_segment(k, column // SEGMENT_COLUMNS)
+        ty = pos[:, 1] // TILE
+        node = self.tile_node[slots, tx, np.minimum(np.maximum(ty, -1), GRID) + 1]
+        on_path = node >= 0
+        fell = ~on_path
+        node = np.where(on_path, node, self.current_node[idx])
+        self.current_node[idx] = node
+        flags = self.flags[slots, node]
+        self.flags[slots, node] = np.where(on_path, 0, flags)  # a visited tile pays and refills only once
+        new_tile = flags & NEW_TILE
+        rewards = self.reward_table[slots, new_tile + 2 * fell]
+        self.tiles_visited[idx] += new_tile
+        stamina = np.where((flags >= REFILL) | fell, self.stamina_level[idx], self.stamina[idx]) - 1
+        self.stamina[idx] = stamina
+        self.t[idx] += 1
+        terminated = (stamina == 0) | (self.t[idx] == self.max_steps[idx])
+        self.draw_from[idx] = self.walk_start[slots, node]
+        for i in np.flatnonzero(fell).tolist():
+            terminated[i] |= self._fall_off(int(slots[i]), int(tx[i]), int(ty[i]), int(node[i]))
+        self.off_path[idx] = fell
+        self.cross_visible[idx] = fell & self.visual_feedback[idx]
+        direction = self.direction[slots, node]
+        self.ground_truth[idx] = np.where(direction == WEST, self.ground_truth[idx], direction)
+        self.max_x[idx] = np.maximum(self.max_x[idx], tx * on_path)
+        return rewards, terminated
+
+    # ------------------------------------------------------------------------------------------- drawing
+    def _draw_slot(self, k: int) -> None:
+        """Draw the agent view of slot ``k`` (the picture of :meth:`_draw`, one slot at a time)."""
+        frame = self.canvas.view[k]
+        x, y = self.pos[k].tolist()
+        half = int(self.half[k])
+        if self.endless:
+            self._draw_floor_slot(k, frame)
+            left = int(self.agent_screen_left[k])
+        else:
+            frame[:] = self.background[k]
+            left = x - half
+        self.agents.sprites[int(self.sprite0[k]) + int(self.heading[k]) // 45].paste(frame, y - half, left)
+        if self.endless and self.show_stamina[k]:
+            frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
+        if self.cross_visible[k]:
+            cross = self.crosses.sprites[self.cross_id]
+            centre_x, centre_y = self._cross_centres(k)
+            cross.paste(frame, int(centre_y) - cross.height // 2, int(centre_x) - cross.width // 2)
+
+    def _draw_floor_slot(self, k: int, frame: np.ndarray) -> None:
+        """The endless floor of slot ``k``: black or ice, then the path tiles behind the agent."""
+        if self.show_background[k]:
+            frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
+        else:
+            frame[:] = 0
+        first, stop = int(self.draw_from[k]), int(self.current_node[k])
+        if stop > first:
+            camera = float(self.camera_x[k])
+            xs, ys = self.chain_lists[k]
+            for tx, ty in zip(xs[first:stop], ys[first:stop], strict=True):
+                left = int(tx * TILE - camera)  # pygame cuts float rects toward zero
+                c0, c1 = max(left, 0), min(left + TILE, SCREEN)
+                if c0 < c1:
+                    frame[ty * TILE : (ty + 1) * TILE, c0:c1] = PATH_TILE[:, c0 - left : c1 - left]
+
+    def _draw(self, idx: Index) -> None:
+        slots = self._slots_of(idx)
+        pos = self.pos[idx]
+        top = pos[:, 1] - self.half[idx]
+        if self.endless:
+            self._draw_floor(idx, slots)
+            left = self.agent_screen_left[idx]
+        else:
+            self.canvas.view[idx] = self.background[idx]
+            left = pos[:, 0] - self.half[idx]
+        sprite = self.sprite0[idx] + self.heading[idx] // 45
+        self.canvas.paste(self.agents, slots, sprite, top, left, may_leave_screen=self.endless)
+        if self.endless:
+            bar = self.show_stamina[idx]
+            if bar.any():
+                with_bar = slots[bar]
+                heights = self._stamina_bar_heights(with_bar)
+                self.canvas.view[with_bar, :, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[heights]
+        cross = self.cross_visible[idx]
+        if cross.any():
+            with_cross = slots[cross]
+            centre_x, centre_y = self._cross_centres(with_cross)
+            half = self.crosses.widths[self.cross_id] // 2
+            ids = np.full(len(with_cross), self.cross_id)
+            self.canvas.paste(self.crosses, with_cross, ids, centre_y - half, centre_x - half, self.endless)
+
+    def _cross_centres(self, slots: np.ndarray | int) -> tuple[np.ndarray, np.ndarray]:
+        """Screen centre of the fall-off cross: the agent's centre (rounded after the endless camera shift)."""
+        x, y = self.pos[slots, 0], self.pos[slots, 1]
+        if self.endless:
+            return round_half_away(x - self.camera_x[slots]), y
+        return x, y
+
+    def _stamina_bar_heights(self, slots: np.ndarray | int) -> np.ndarray:
+        level = self.stamina_level[slots]
+        return (SCREEN * (1 - np.minimum(self.stamina[slots], level) / level)).astype(np.int64)
+
+    def _draw_floor(self, idx: Index, slots: np.ndarray) -> None:
+        """The endless floor (black or scrolling ice) and the path tiles behind the agent, band by band."""
+        m = len(slots)
+        phase = np.where(self.show_background[idx], (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
+        edge = np.empty((m, GRID, BAND_WIDTH, 3), dtype=np.uint8)
+        middle = np.empty((m, GRID, BAND_WIDTH, 3), dtype=np.uint8)
+        edge[:, :, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_EDGE[phase][:, None]
+        middle[:, :, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_MIDDLE[phase][:, None]
+        first = self.draw_from[idx]
+        count = self.current_node[idx] - first
+        most = int(count.max())
+        if most > 0:
+            rows, cols = np.nonzero(np.arange(most) < count[:, None])
+            owner = slots[rows]
+            chain = first[rows] + cols
+            # Each tile's screen column is truncated on its own (pygame cuts float rects toward zero).
+            left = np.trunc(self.chain_x[owner, chain] * TILE - self.camera_x[owner]).astype(np.int64)
+            left = np.minimum(np.maximum(left, -BAND_PAD), SCREEN) + BAND_PAD
+            start = ((rows * GRID + self.chain_y[owner, chain]) * BAND_WIDTH + left) * 3
+            at = start[:, None] + TILE_BYTE_OFFSETS
+            edge.reshape(-1)[at] = TILE_EDGE_BYTES
+            middle.reshape(-1)[at] = TILE_MIDDLE_BYTES
+        bands = self.canvas.bands if isinstance(idx, slice) else np.empty((m, GRID, TILE, SCREEN, 3), np.uint8)
+        visible = slice(BAND_PAD, BAND_PAD + SCREEN)
+        bands[:, :, 0] = edge[:, :, visible]
+        bands[:, :, TILE - 1] = edge[:, :, visible]
+        bands[:, :, 1 : TILE - 1] = middle[:, :, None, visible]
+        if not isinstance(idx, slice):
+            self.canvas.view[idx] = bands.reshape(m, SCREEN, SCREEN, 3)
+
+    # ------------------------------------------------------------------------------------------ outputs
+    def _observation(self, idx: Index) -> np.ndarray:
+        return self.canvas.view[idx]
+
+    def _final_info(self, k: int) -> dict[str, Any]:
+        if self.endless:
+            return {
+                "num_fails": int(self.num_fails[k]),
+                "max_x": int(self.max_x[k]),
+                "tiles_visited": int(self.tiles_visited[k]),
+            }
+        return {"success": int(self.success[k]), "num_fails": int(self.num_fails[k])}
+
+    def _step_info(self, k: int) -> dict[str, Any]:
+        if self.endless:
+            return {"ground_truth": DIRECTIONS[self.ground_truth[k]].copy()}
+        return {}
+
+    def _debug_frame(self, k: int) -> np.ndarray:
+        """Ground truth: the whole level (path white, origin blue, goal green, walls red) or, in the endless
+        variant, every generated path tile at alpha 200 and the stamina bar; plus the agent and the cross."""
+        frame = np.zeros((SCREEN, SCREEN, 3), dtype=np.uint8)
+        x, y = (int(v) for v in self.pos[k])
+        if self.endless:
+            if self.show_background[k]:
+                frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
+            shift = int(-self.camera_x[k])  # the whole path picture is placed once, so it is truncated once
+            xs, ys = self.path_tiles(k)
+            for tx, ty in zip(xs, ys, strict=True):
+                left = tx * TILE + shift
+                if -TILE < left < SCREEN:
+                    area = frame[ty * TILE : (ty + 1) * TILE, max(left, 0) : left + TILE]
+                    area[:] = blend(area, np.array(PATH_COLOUR), DEBUG_PATH_ALPHA)
+            left = int(self.agent_screen_left[k])
+        else:
+            origin, goal, layout = self.levels[k]
+            for tile in layout.path[1:-1]:
+                _fill_tile(frame, tile, PATH_COLOUR)
+            _fill_tile(frame, origin, ORIGIN_COLOUR)
+            _fill_tile(frame, goal, GOAL_COLOUR)
+            for tile in layout.walls:
+                _fill_tile(frame, tile, WALL_COLOUR)
+            left = x - int(self.half[k])
+        self.agents.sprites[int(self.sprite0[k] + self.heading[k] // 45)].paste(frame, y - int(self.half[k]), left)
+        if self.cross_visible[k]:
+            cross = self.crosses.sprites[self.cross_id]
+            centre_x, centre_y = self._cross_centres(k)
+            cross.paste(frame, int(centre_y) - cross.height // 2, int(centre_x) - cross.width // 2)
+        if self.endless:
+            frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
+        return frame
+
+
+@cache
+def _velocities(endless: bool, speed: float) -> np.ndarray:
+    """(vx, vy) of each action code of the free controller at ``speed`` px per step."""
+    actions = ENDLESS_ACTIONS if endless else FREE_ACTIONS
+    vx, vy = continuous_velocity(actions, np.full(len(actions), speed))
+    return np.stack([vx, vy], axis=1).astype(np.int64)
+
+
+def _direction(x0: int, y0: int, x1: int, y1: int) -> int:
+    """Ground-truth direction of a step along the path (west has no code)."""
+    if x1 - x0 == 1:
+        return EAST
+    return NORTH if y1 - y0 == -1 else (SOUTH if y1 - y0 == 1 else WEST)
+
+
+def _fill_tile(frame: np.ndarray, tile: tuple[int, int], colour: tuple[int, int, int]) -> None:
+    x, y = tile
+    frame[y * TILE : (y + 1) * TILE, x * TILE : (x + 1) * TILE] = colour

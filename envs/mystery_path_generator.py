@@ -1,0 +1,235 @@
+"""How Mystery Path levels are made: walls at random, then a randomised best-first search from origin to goal.
+
+The level is a ``width`` x ``height`` grid of tiles (7 x 7 in every Mystery Path environment). The origin and the
+goal lie on opposite borders. :func:`generate_path` builds one level in four stages, drawing every random number from
+the generator it is given, in a fixed order (so a seed always gives the same level, tile for tile, as memory-gym):
+
+1. **Inner walls.** Each tile with ``1 <= x <= width - 3`` and ``1 <= y <= height - 3`` (visited column by column,
+   top to bottom) becomes a wall with probability 33/100 (one ``integers(0, 100)`` draw each). The bounds are
+   lopsided (the original loop stops one column and one row early), so column ``width - 2`` and row ``height - 2``
+   never hold a wall.
+2. **Border walls.** The candidates are the border tiles (column by column) that are neither the origin nor the goal,
+   not a 4-neighbour of either, and have no inner wall among their eight surrounding tiles. Then ``4`` or ``8`` of
+   them (one coin flip) are picked uniformly one after another, without replacement, and become walls. Border walls
+   placed in this stage do not exclude each other, so two may touch.
+3. **Search.** A best-first search from the origin whose step costs are random (uniform 1..8, drawn afresh every
+   time a neighbour is examined). Each examined tile gets ``f = g + h`` with ``h`` the straight-line distance to the
+   goal. Three details make it a *random path maker* rather than a shortest-path search, and they shape the levels:
+
+   * the next tile taken from the open list is the **first** one whose ``f`` is smaller than the ``f`` of the list's
+     head (or the head itself when there is none), not the minimum;
+   * a cheaper way to a tile that is already open re-points its parent but keeps its old ``g``;
+   * a cost is drawn for every examined neighbour that is not closed and not a wall, also for open ones.
+
+   Neighbours are examined in the order right, left, down, up. The search stops when the goal is taken from the list.
+4. **Path.** The path is the parent chain from the goal back to the origin, returned origin first. Every tile of it
+   is a 4-neighbour of the next one. Over 2000 levels its length (origin and goal included) was 7 to 15 tiles,
+   10 on average, and it may double back on itself.
+
+The search never failed on a 7 x 7 grid; if no path exists it raises ``RuntimeError``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+Tile = tuple[int, int]
+
+WALL_PERCENT = 33  # an inner tile is a wall when integers(0, 100) < 33
+BORDER_WALL_COUNTS = (4, 8)
+COST_LOW, COST_HIGH = 1, 9  # step costs: integers(1, 9), i.e. 1..8
+_UINT32 = 1 << 32
+
+
+@dataclass(frozen=True)
+class MysteryPathLayout:
+    """One generated level: the path (origin first, goal last) and the walls (inner ones first, then border ones)."""
+
+    path: tuple[Tile, ...]
+    walls: tuple[Tile, ...]
+
+
+class _Draws:
+    """``rng.integers(0, n)`` for small ``n``, exactly as numpy draws it, without numpy's cost per call.
+
+    A level takes about 70 small draws, and numpy spends far longer per call than the draw itself. For a range
+    below 2**32 numpy's ``Generator.integers`` uses one 32-bit output of the bit generator per draw and Lemire's
+    multiply-shift method (redrawing in the rare biased case); PCG64 hands out the low, then the high half of each
+    64-bit output and keeps an unused high half in its state. This class reads 64-bit outputs ahead in blocks, makes
+    the same draws, and :meth:`close` leaves the generator exactly where drawing one value at a time would have.
+    (Tests compare it with ``Generator.integers`` draw for draw.)
+    """
+
+    BLOCK = 48  # 64-bit outputs read at a time (most levels need one block)
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        if not isinstance(rng.bit_generator, np.random.PCG64):
+            raise TypeError(f"the path generator reproduces PCG64 streams; got {type(rng.bit_generator).__name__}")
+        self.bit_generator = rng.bit_generator
+        self.saved = self.bit_generator.state
+        self.values: list[int] = [self.saved["uinteger"]] if self.saved["has_uint32"] else []
+        self.buffered = len(self.values)  # a high half left over in the generator's state
+        self.used = 0
+
+    def read_ahead(self) -> None:
+        """Append the 32-bit outputs of the next block of 64-bit outputs to ``values`` (low half first)."""
+        words = self.bit_generator.random_raw(self.BLOCK)
+        self.values += words.astype("<u8", copy=False).view("<u4").tolist()
+
+    def below(self, n: int, count: int = 1) -> list[int]:
+        """The values of ``count`` calls ``rng.integers(0, n)``, for 1 <= n < 2**32."""
+        if n == 1:
+            return [0] * count  # numpy draws nothing when there is only one choice
+        values, used, out = self.values, self.used, []
+        threshold = (_UINT32 - n) % n  # Lemire: a low part below this would bias the result, so redraw
+        while len(out) < count:
+            if used == len(values):
+                self.read_ahead()
+            scaled = values[used] * n
+            used += 1
+            low = scaled & (_UINT32 - 1)
+            if low >= n or low >= threshold:
+                out.append(scaled >> 32)
+        self.used = used
+        return out
+
+    def close(self) -> None:
+        """Rewind the generator to just after the 32-bit outputs that were used."""
+        if len(self.values) == self.buffered and self.used == 0:
+            return
+        state = dict(self.saved)
+        from_words = self.used - self.buffered
+        words = (from_words + 1) // 2 if from_words > 0 else 0
+        if from_words > 0:
+            state["has_uint32"] = from_words % 2
+            state["uinteger"] = self.values[self.buffered + 2 * words - 1]
+        elif self.used:
+            state["has_uint32"] = 0
+        self.bit_generator.state = state  # random_raw below advances the 64-bit state and keeps this half
+        if words:
+            self.bit_generator.random_raw(words)
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """Tables of a width x height grid; tile (x, y) has the index ``x * height + y``."""
+
+    width: int
+    height: int
+    neighbours: tuple[tuple[int, ...], ...]  # 4-neighbours: right, left, down, up
+    near: tuple[int, ...]  # bit mask of each tile and its 4-neighbours
+    surrounding: tuple[int, ...]  # bit mask of the 4-neighbours and diagonal neighbours of each tile
+    inner: tuple[int, ...]  # tiles that may become inner walls, in draw order
+    border: tuple[int, ...]  # border tiles, column by column
+    distance: tuple[tuple[float, ...], ...]  # distance[goal][tile]: straight-line distance between the two
+    tiles: tuple[Tile, ...]  # (x, y) of each index
+
+
+@cache
+def _grid(width: int, height: int) -> _Grid:
+    def index(x: int, y: int) -> int:
+        return x * height + y
+
+    def inside(x: int, y: int) -> bool:
+        return 0 <= x < width and 0 <= y < height
+
+    tiles = tuple((x, y) for x in range(width) for y in range(height))
+    neighbours, near, surrounding = [], [], []
+    for x, y in tiles:
+        four = [index(*t) for t in ((x + 1, y), (x - 1, y), (x, y + 1), (x, y - 1)) if inside(*t)]
+        diagonal = [index(*t) for t in ((x + 1, y + 1), (x - 1, y - 1), (x + 1, y - 1), (x - 1, y + 1)) if inside(*t)]
+        neighbours.append(tuple(four))
+        near.append(sum(1 << t for t in [index(x, y), *four]))
+        surrounding.append(sum(1 << t for t in four + diagonal))
+    inner = tuple(index(x, y) for x in range(1, width - 2) for y in range(1, height - 2))
+    border = tuple(index(x, y) for x, y in tiles if x in (0, width - 1) or y in (0, height - 1))
+    distance = tuple(tuple(math.sqrt((x - gx) ** 2 + (y - gy) ** 2) for x, y in tiles) for gx, gy in tiles)
+    return _Grid(width, height, tuple(neighbours), tuple(near), tuple(surrounding), inner, border, distance, tiles)
+
+
+def generate_path(rng: np.random.Generator, width: int, height: int, origin: Tile, goal: Tile) -> MysteryPathLayout:
+    """Build one Mystery Path level on a ``width`` x ``height`` grid from ``origin`` to ``goal`` (see the module doc).
+
+    ``origin`` and ``goal`` should lie on the border; ``rng`` is advanced exactly as memory-gym 1.0.2 advances it.
+    """
+    grid = _grid(int(width), int(height))
+    start = int(origin[0]) * grid.height + int(origin[1])
+    end = int(goal[0]) * grid.height + int(goal[1])
+    n = grid.width * grid.height
+
+    draws = _Draws(rng)
+
+    # 1. Inner walls (a bit mask, and a list in the order they were made).
+    inner = grid.inner
+    walls = [tile for tile, draw in zip(inner, draws.below(100, len(inner)), strict=True) if draw < WALL_PERCENT]
+    wall_bits = sum(1 << tile for tile in walls)
+
+    # 2. Border walls.
+    excluded = grid.near[start] | grid.near[end]
+    surrounding = grid.surrounding
+    candidates = [t for t in grid.border if not (excluded >> t) & 1 and not surrounding[t] & wall_bits]
+    for _ in range(BORDER_WALL_COUNTS[draws.below(len(BORDER_WALL_COUNTS))[0]]):
+        if candidates:
+            tile = candidates.pop(draws.below(len(candidates))[0])
+            wall_bits |= 1 << tile
+            walls.append(tile)
+
+    # 3. Randomised best-first search. Tile states: 0 not seen, 1 open, 2 closed or wall.
+    state = [0] * n
+    for tile in walls:
+        state[tile] = 2
+    neighbours, distance = grid.neighbours, grid.distance[end]
+    g = [0] * n
+    f = [0.0] * n
+    parent = [-1] * n
+    open_list = [start]
+    state[start] = 1
+    # The step costs integers(1, 9) are read inline from the 32-bit outputs: for a range of 8 numpy's method is
+    # "the top 3 bits" and never redraws.
+    assert COST_HIGH - COST_LOW == 8
+    values, used = draws.values, draws.used
+    while open_list:
+        head = f[open_list[0]]
+        pick = 0
+        for i in range(1, len(open_list)):
+            if f[open_list[i]] < head:
+                pick = i
+                break
+        current = open_list[pick]
+        if current == end:
+            break
+        del open_list[pick]
+        state[current] = 2
+        if used + 4 > len(values):  # enough outputs for every neighbour
+            draws.read_ahead()
+        g_current = g[current] + COST_LOW
+        for tile in neighbours[current]:
+            seen = state[tile]
+            if seen == 2:
+                continue
+            cost = g_current + (values[used] >> 29)
+            used += 1
+            if seen:
+                if cost < g[tile]:
+                    parent[tile] = current  # the better cost itself is not kept (f stays as it was)
+            else:
+                g[tile] = cost
+                f[tile] = cost + distance[tile]
+                parent[tile] = current
+                state[tile] = 1
+                open_list.append(tile)
+    else:
+        raise RuntimeError("No valid path found")
+    draws.used = used
+    draws.close()
+
+    # 4. The parent chain, origin first.
+    chain = [end]
+    while parent[chain[-1]] >= 0:
+        chain.append(parent[chain[-1]])
+    tiles = grid.tiles
+    return MysteryPathLayout(path=tuple(tiles[t] for t in reversed(chain)), walls=tuple(tiles[t] for t in walls))

@@ -1,0 +1,154 @@
+"""The batched core and its faces, exercised on the tiny ProofOfMemory-v0 family."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import envs
+from envs.core import seeded_generator
+
+
+def play(env: gym.Env, seed: int | None, actions: list[int]) -> list[tuple]:
+    obs, info = env.reset(seed=seed)
+    out = [(obs.tobytes(), info)]
+    for a in actions:
+        obs, reward, terminated, truncated, info = env.step(a)
+        out.append((obs.tobytes(), reward, terminated, truncated, info))
+        if terminated:
+            break
+    return out
+
+
+def test_seeded_generator_matches_gymnasium_seeding() -> None:
+    from gymnasium.utils import seeding
+
+    ours, theirs = seeded_generator(123), seeding.np_random(123)[0]
+    assert ours.integers(0, 10**9, size=5).tolist() == theirs.integers(0, 10**9, size=5).tolist()
+
+
+def test_same_seed_same_episode_and_np_random_is_the_level_generator() -> None:
+    env = gym.make("ProofOfMemory-v0")
+    first = play(env, 7, [0] * 10)
+    second = play(env, 7, [0] * 10)
+    assert first == second
+    env.reset(seed=7)
+    assert env.unwrapped.np_random is env.unwrapped.core.rngs[0]
+
+
+def test_unseeded_reset_continues_the_generator() -> None:
+    env = gym.make("ProofOfMemory-v0")
+    env.reset(seed=5)
+    cues = [int(env.unwrapped.core.cue[0])]
+    for _ in range(20):
+        env.reset()
+        cues.append(int(env.unwrapped.core.cue[0]))
+    rng = seeded_generator(5)
+    assert cues == [int(rng.integers(0, 2)) for _ in range(21)]
+
+
+def test_options_apply_to_one_episode_and_constructor_options_are_defaults() -> None:
+    env = gym.make("ProofOfMemory-v0")
+    env.reset(seed=0, options={"delay": 2})
+    assert env.unwrapped.core.delay[0] == 2
+    env.reset(seed=0)
+    assert env.unwrapped.core.delay[0] == 4
+    env = gym.make("ProofOfMemory-v0", options={"delay": 9})
+    env.reset(seed=0)
+    assert env.unwrapped.core.delay[0] == 9
+    with pytest.raises(ValueError, match="unknown option 'dealy'"):
+        gym.make("ProofOfMemory-v0", options={"dealy": 9})
+
+
+def test_invalid_reset_leaves_the_episode_untouched() -> None:
+    env = gym.make("ProofOfMemory-v0")
+    obs, _ = env.reset(seed=1)
+    with pytest.raises(ValueError, match="'delay'=0"):
+        env.reset(seed=2, options={"delay": 0})
+    assert env.unwrapped.core.seeds[0] == 1
+    np.testing.assert_array_equal(env.unwrapped.core.observations()[0], obs)
+
+
+def test_make_core_rejects_unknown_ids_and_bad_sizes() -> None:
+    with pytest.raises(ValueError, match="unknown environment id 'Nope-v0'; valid ids: ProofOfMemory-v0"):
+        envs.make_core("Nope-v0")
+    with pytest.raises(ValueError, match="num_envs=0"):
+        envs.make_core("ProofOfMemory-v0", num_envs=0)
+
+
+def test_bad_render_mode_and_autoreset_mode_are_named() -> None:
+    with pytest.raises(ValueError, match="render_mode='rgb'.*valid render modes"):
+        gym.make("ProofOfMemory-v0", render_mode="rgb")
+    with pytest.raises(ValueError, match="autoreset_mode='later'"):
+        gym.make_vec("ProofOfMemory-v0", num_envs=2, autoreset_mode="later")
+
+
+def test_vector_next_step_autoreset_matches_single_envs() -> None:
+    n, delay = 3, 2
+    vec = gym.make_vec("ProofOfMemory-v0", num_envs=n, options={"delay": delay})
+    assert vec.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    obs, _ = vec.reset(seed=10)
+    singles = [gym.make("ProofOfMemory-v0", options={"delay": delay}) for _ in range(n)]
+    single_obs = [env.reset(seed=10 + k)[0] for k, env in enumerate(singles)]
+    np.testing.assert_array_equal(obs, np.stack(single_obs))
+    rng = np.random.default_rng(0)
+    for t in range(3 * (delay + 2)):
+        actions = rng.integers(0, 2, size=n)
+        obs, rewards, terminated, truncated, infos = vec.step(actions)
+        if t % (delay + 2) == delay + 1:  # the step after an episode end: reset, reward 0, action ignored
+            expect = [env.reset()[0] for env in singles]
+            np.testing.assert_array_equal(obs, np.stack(expect))
+            assert not rewards.any() and not terminated.any()
+            continue
+        for k, env in enumerate(singles):
+            o, r, te, tr, info = env.step(int(actions[k]))
+            np.testing.assert_array_equal(obs[k], o)
+            assert (rewards[k], terminated[k], truncated[k]) == (r, te, tr)
+            if te:
+                assert infos["_success"][k] and infos["success"][k] == info["success"]
+                assert infos["length"][k] == info["length"] == delay + 1
+
+
+def test_vector_same_step_autoreset_reports_final_obs_and_info() -> None:
+    vec = gym.make_vec("ProofOfMemory-v0", num_envs=2, autoreset_mode="SameStep", options={"delay": 1})
+    vec.reset(seed=0)
+    vec.step(np.zeros(2, dtype=np.int64))
+    obs, rewards, terminated, _, infos = vec.step(np.zeros(2, dtype=np.int64))
+    assert terminated.all()
+    assert infos["_final_obs"].all() and infos["final_obs"][0].shape == (36, 36, 3)
+    assert infos["final_info"]["length"].tolist() == [2, 2]  # gymnasium batches nested info dicts
+    np.testing.assert_array_equal(obs, vec.unwrapped.core.observations())  # already the next episode's first frame
+    assert vec.unwrapped.core.episode_length.tolist() == [0, 0]
+
+
+def test_vector_reset_mask_resets_only_masked_slots() -> None:
+    vec = gym.make_vec("ProofOfMemory-v0", num_envs=3)
+    vec.reset(seed=[1, 2, 3])
+    vec.step(np.zeros(3, dtype=np.int64))
+    vec.reset(seed=[None, 9, None], options={"reset_mask": np.array([False, True, False])})
+    core = vec.unwrapped.core
+    assert core.t.tolist() == [1, 0, 1] and core.seeds == [1, 9, 3]
+    with pytest.raises(ValueError, match="reset_mask has shape"):
+        vec.reset(options={"reset_mask": np.ones(2, dtype=bool)})
+
+
+def test_render_modes() -> None:
+    env = gym.make("ProofOfMemory-v0", render_mode="rgb_array")
+    obs, _ = env.reset(seed=0)
+    np.testing.assert_array_equal(env.render(), obs)
+    env = gym.make("ProofOfMemory-v0", render_mode="debug_rgb_array")
+    obs, _ = env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (144, 144, 3)
+    np.testing.assert_array_equal(frame[::4, ::4], obs)
+
+
+def test_human_render_opens_a_dummy_window(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    env = gym.make("ProofOfMemory-v0", render_mode="human")
+    env.reset(seed=0)
+    env.step(0)
+    assert env.unwrapped._window is not None
+    env.close()

@@ -1,0 +1,130 @@
+"""The Mystery Path level generator against levels recorded from memory-gym 1.0.2 (tests/data/mp_paths.json.gz)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import envs
+from envs.core import seeded_generator
+from envs.mystery_path_generator import _Draws, generate_path
+from scripts.trace_format import load_mp_paths
+
+GRID = 7
+SIDES = {  # cardinal_origin_choice value -> (origin, goal) from the two row/column draws
+    0: lambda a, b: ((0, a), (6, b)),
+    1: lambda a, b: ((6, a), (0, b)),
+    2: lambda a, b: ((a, 0), (b, 6)),
+    3: lambda a, b: ((a, 6), (b, 0)),
+}
+
+
+@pytest.fixture(scope="module")
+def recorded() -> dict:
+    return load_mp_paths()
+
+
+def _level_from_seed(seed: int, choice: list[int]) -> tuple[tuple, tuple, object, np.random.Generator]:
+    """Make the draws of a MysteryPath-v0 reset (side, two positions), then the level."""
+    rng = seeded_generator(seed)
+    side = choice[int(rng.integers(0, len(choice)))]
+    origin, goal = SIDES[side](int(rng.integers(0, GRID)), int(rng.integers(0, GRID)))
+    return origin, goal, generate_path(rng, GRID, GRID, origin, goal), rng
+
+
+def test_levels_match_the_reference_tile_for_tile(recorded: dict) -> None:
+    layouts = recorded["MysteryPath-v0"]
+    assert len(layouts) == 500  # seeds 0..299 with the default sides, 0..49 for each single side
+    for record in layouts:
+        choice = (record["options"] or {}).get("cardinal_origin_choice", [0, 1, 2, 3])
+        origin, goal, layout, _ = _level_from_seed(record["seed"], choice)
+        where = f"seed {record['seed']} options {record['options']}"
+        assert [list(origin), list(goal)] == [record["origin"], record["goal"]], where
+        assert [list(t) for t in layout.path] == record["path"], where
+        assert sorted(list(t) for t in layout.walls) == record["walls"], where
+
+
+def test_environment_levels_match_the_reference(recorded: dict) -> None:
+    core = envs.make_core("MysteryPath-v0")
+    for record in recorded["MysteryPath-v0"][:100]:
+        core.reset_slot(0, seed=record["seed"], options=record["options"])
+        origin, goal, layout = core.levels[0]
+        assert [list(t) for t in layout.path] == record["path"]
+        assert (list(origin), list(goal)) == (record["origin"], record["goal"])
+
+
+def test_endless_segments_match_the_reference(recorded: dict) -> None:
+    core = envs.make_core("Endless-MysteryPath-v0")
+    records = recorded["Endless-MysteryPath-v0"]
+    assert len(records) == 100
+    for record in records:
+        core.reset_slot(0, seed=record["seed"])
+        xs, ys = core.path_tiles(0)  # the three segments the reference builds at reset
+        ends = [0, *core.segment_ends[0]]
+        bounds = zip(ends, ends[1:], strict=False)
+        segments = [[[x, y] for x, y in zip(xs[a:b], ys[a:b], strict=True)] for a, b in bounds]
+        assert segments == record["segments"], f"seed {record['seed']}"
+
+
+def test_level_properties_over_many_seeds() -> None:
+    lengths, border_walls = [], set()
+    for seed in range(400):
+        origin, goal, layout, _ = _level_from_seed(seed, [0, 1, 2, 3])
+        path, walls = layout.path, set(layout.walls)
+        assert path[0] == origin and path[-1] == goal
+        assert len(set(path)) == len(path)  # a parent chain never repeats a tile
+        assert all(abs(a[0] - b[0]) + abs(a[1] - b[1]) == 1 for a, b in zip(path, path[1:], strict=False))
+        assert not walls & set(path)
+        inner = {w for w in walls if 0 < w[0] < GRID - 1 and 0 < w[1] < GRID - 1}
+        assert all(1 <= x <= GRID - 3 and 1 <= y <= GRID - 3 for x, y in inner)  # the lopsided inner-wall loop
+        border_walls.add(len(walls - inner))
+        lengths.append(len(path))
+    assert border_walls <= {4, 8} and border_walls == {4, 8}
+    assert min(lengths) >= GRID and 9 < np.mean(lengths) < 11.5  # the reference: 7..15, mean 10.1
+
+
+def test_generator_leaves_the_rng_where_one_draw_at_a_time_would() -> None:
+    # Two consecutive levels from one generator equal the recorded endless segments only if the first level
+    # consumed exactly the reference's draws; here: the state after a level is independent of read-ahead.
+    for seed in range(50):
+        rng = seeded_generator(seed)
+        generate_path(rng, GRID, GRID, (0, 3), (6, 4))
+        again = seeded_generator(seed)
+        generate_path(again, GRID, GRID, (0, 3), (6, 4))
+        assert rng.bit_generator.state == again.bit_generator.state
+    with pytest.raises(TypeError, match="PCG64"):
+        generate_path(np.random.Generator(np.random.Philox(0)), GRID, GRID, (0, 3), (6, 4))
+
+
+@pytest.mark.parametrize("buffered", [False, True])
+def test_bounded_draws_equal_numpy_integers(buffered: bool) -> None:
+    sizes = [1, 2, 3, 7, 8, 13, 100, 2**31 + 5, 3_000_000_000]
+    plan = np.random.default_rng(1)
+    for seed in range(400):
+        ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+        if buffered:  # leave an unused 32-bit half in the generator's state
+            ours.integers(0, 5)
+            theirs.integers(0, 5)
+        ranges = plan.choice(sizes, size=int(plan.integers(0, 200))).tolist()
+        draws = _Draws(ours)
+        got = [draws.below(n)[0] for n in ranges]
+        draws.close()
+        assert got == [int(theirs.integers(0, n)) for n in ranges], seed
+        assert ours.bit_generator.state == theirs.bit_generator.state, seed
+
+
+@pytest.mark.parametrize("rejected", [0, 42_949_673])
+def test_bounded_draws_redraw_like_numpy_in_the_biased_case(rejected: int) -> None:
+    # For n = 100 numpy redraws when the low 32 bits of x * 100 are below (2**32 - 100) % 100 = 96 (probability
+    # 2e-8). Put such an x into the generator's buffered 32-bit half, so that it is the next output drawn.
+    assert ((rejected * 100) & 0xFFFFFFFF) < 96
+    for seed in range(20):
+        ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+        state = ours.bit_generator.state
+        state.update(has_uint32=1, uinteger=rejected)
+        ours.bit_generator.state = theirs.bit_generator.state = state
+        draws = _Draws(ours)
+        got = draws.below(100, 3)
+        draws.close()
+        assert got == theirs.integers(0, 100, size=3).tolist()
+        assert ours.bit_generator.state == theirs.bit_generator.state
