@@ -43,6 +43,68 @@ def seeded_generator(seed: int) -> np.random.Generator:
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed)))
 
 
+_WORD = 1 << 32
+
+
+class BoundedDraws:
+    """``rng.integers(0, high)`` values (so also ``rng.choice`` of lists) one by one, from bulk draws of raw words.
+
+    numpy draws a bounded int below ``high <= 2**32`` with Lemire's method on 32-bit words: one word, unless a
+    (very rare) rejection asks for another, and no word at all for ``high == 1``. Emulating that on words drawn in
+    bulk gives the same values and leaves the generator in the same state as the scalar calls, at a fraction of
+    their cost. ``reserve(n)`` draws n words at once: only reserve words that ``below`` will certainly use (each
+    call with ``high > 1`` uses at least one); if they run short (a rejection), more are drawn one by one.
+
+    A 32-bit word is the low half of a fresh 64-bit output, or the high half that the previous word left over in
+    the bit generator. With ``fresh=True`` (a generator that has drawn nothing yet, so holds no leftover half) the
+    words come from 64-bit outputs (``random_raw``, the cheapest call), and the leftover half is tracked here;
+    otherwise numpy's own 32-bit bulk call draws them.
+    """
+
+    __slots__ = ("rng", "words", "used", "raw", "buffered")
+
+    def __init__(self, rng: np.random.Generator, reserve: int = 0, fresh: bool = False) -> None:
+        self.rng, self.words, self.used, self.raw, self.buffered = rng, [], 0, fresh, False
+        self.reserve(reserve)
+
+    def _word(self) -> int:
+        """One word through numpy itself, which keeps any leftover half in the bit generator."""
+        self.buffered = not self.buffered
+        return int(self.rng.integers(0, _WORD, dtype=np.uint32))
+
+    def reserve(self, count: int) -> None:
+        if count <= 0:
+            return
+        if not self.raw:
+            self.words += self.rng.integers(0, _WORD, size=count, dtype=np.uint32).tolist()
+            return
+        if self.buffered:
+            self.words.append(self._word())
+            count -= 1
+        if count >= 2:
+            for raw in self.rng.bit_generator.random_raw(count // 2).tolist():
+                self.words += (raw & (_WORD - 1), raw >> 32)  # low half first, as numpy's next_uint32 does
+        if count % 2:
+            self.words.append(self._word())
+
+    def below(self, high: int) -> int:
+        if high <= 1:
+            return 0
+        while True:
+            if self.used == len(self.words):
+                self.words.append(self._word())
+            product = self.words[self.used] * high
+            self.used += 1
+            low_bits = product & (_WORD - 1)
+            if low_bits >= high or low_bits >= (_WORD - high) % high:
+                return product >> 32
+
+    def close(self) -> None:
+        """Check that every reserved word was used (otherwise the generator ran ahead of the reference)."""
+        if self.used != len(self.words):
+            raise RuntimeError(f"{len(self.words) - self.used} reserved random words were not used")
+
+
 class BatchedCore:
     """State and mechanics of ``num_envs`` independent episodes of one environment family."""
 
@@ -222,9 +284,14 @@ class MemoryGymEnv(gym.Env):
         self._window: HumanWindow | None = None
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
-        super().reset(seed=seed)
+        # Not ``super().reset(seed)``: that would seed a second generator (as costly as the level) only to replace
+        # it. env.np_random is the generator that builds the levels; np_random_seed follows gymnasium's rules.
         self.core.reset_slot(0, seed, options)
-        self._np_random = self.core.rngs[0]  # env.np_random is the generator that builds the levels
+        self._np_random = self.core.rngs[0]
+        if seed is not None:
+            self._np_random_seed = int(seed)
+        elif self._np_random_seed is None:
+            self._np_random_seed = -1  # gymnasium's value for a generator that was not seeded through reset
         if self.render_mode == "human":
             self.render()
         return self._obs(), self.core.step_info(0)
@@ -238,7 +305,7 @@ class MemoryGymEnv(gym.Env):
         return self._obs(), float(rewards[0]), bool(terminated[0]), False, info
 
     def _obs(self) -> Any:
-        obs = self.core.observations(np.array([0]))
+        obs = self.core.observations()  # the only slot; a view, copied once (not gathered, then copied)
         if isinstance(obs, dict):
             return {key: v[0] for key, v in obs.items()}
         return obs[0]

@@ -115,3 +115,91 @@ def paste_agent(frame: np.ndarray, x: int, y: int, heading: int, scale: float = 
     """Draw the agent centred on pixel (x, y) with the sprite of ``heading`` (a multiple of 45 degrees)."""
     sprite = agent_sprites(scale)[(int(heading) % 360) // 45]
     sprite.paste(frame, int(y) - sprite.height // 2, int(x) - sprite.width // 2)
+
+
+class SpriteSheet:
+    """Same-anchored sprites (e.g. the eight agent headings) cropped to their common bounding box, pasted in batches.
+
+    Frames are given as a ``(num_frames, H, W * 3)`` uint8 view, so a sprite row is one contiguous run of bytes.
+    ``paste`` puts sprite ``which[i]`` into frame ``slots[i]`` with the sprite's anchor on pixel (rows[i], cols[i]).
+    Many pastes go through one gather/composite/scatter over strided windows; a few, or clipped ones, are looped.
+    """
+
+    BATCH_MIN = 6  # below this many sprites a Python loop of slice pastes is faster than the windowed gather
+
+    def __init__(self, sprites: tuple[Sprite, ...] | list[Sprite], anchor_row: int, anchor_col: int) -> None:
+        union = np.zeros_like(sprites[0].mask)
+        for sprite in sprites:
+            if sprite.mask.shape != union.shape:
+                raise ValueError("all sprites of a sheet must have the same canvas size")
+            union |= sprite.mask
+        rows, cols = np.flatnonzero(union.any(axis=1)), np.flatnonzero(union.any(axis=0))
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        self.height, self.width = int(r1 - r0), int(c1 - c0)
+        self.top, self.left = int(r0 - anchor_row), int(c0 - anchor_col)  # window corner relative to the anchor
+        self.rgb = np.stack([s.rgb[r0:r1, c0:c1].reshape(self.height, -1) for s in sprites])
+        self.mask = np.stack([np.repeat(s.mask[r0:r1, c0:c1], 3, axis=1) for s in sprites])
+        self._rgb_list, self._mask_list = list(self.rgb), list(self.mask)
+        # for batches: frame bytes to keep (255 where transparent) and sprite bytes (0 where transparent)
+        self.keep = np.where(self.mask, 0, 255).astype(np.uint8)
+        self.ink = np.where(self.mask, self.rgb, 0).astype(np.uint8)
+        self._windows: dict[tuple, np.ndarray] = {}
+
+    def _window_view(self, frames: np.ndarray) -> np.ndarray:
+        """Every (height x width) window of every frame, as a writeable strided view (no copy)."""
+        key = (id(frames), frames.shape, frames.strides)  # the cached view keeps `frames` alive, so its id is unique
+        view = self._windows.get(key)
+        if view is None:
+            n, h, w3 = frames.shape
+            shape = (n, h - self.height + 1, (w3 - 3 * self.width) // 3 + 1, self.height, 3 * self.width)
+            strides = (
+                frames.strides[0],
+                frames.strides[1],
+                3 * frames.strides[2],
+                frames.strides[1],
+                frames.strides[2],
+            )
+            view = np.lib.stride_tricks.as_strided(frames, shape, strides, writeable=True)
+            if len(self._windows) >= 4:  # the views keep their frame buffers alive: keep only a few
+                self._windows.clear()
+            self._windows[key] = view
+        return view
+
+    def paste_one(self, frame: np.ndarray, row: int, col: int, which: int) -> None:
+        """Paste sprite ``which`` into one ``(H, W * 3)`` frame with its anchor on pixel (row, col), clipped."""
+        top, left = row + self.top, col + self.left
+        height, width = frame.shape[0], frame.shape[1] // 3
+        if 0 <= top <= height - self.height and 0 <= left <= width - self.width:
+            window = frame[top : top + self.height, 3 * left : 3 * (left + self.width)]
+            np.copyto(window, self._rgb_list[which], where=self._mask_list[which])
+            return
+        r0, r1 = max(top, 0), min(top + self.height, height)
+        c0, c1 = max(left, 0), min(left + self.width, width)
+        if r0 < r1 and c0 < c1:
+            sub = (slice(r0 - top, r1 - top), slice(3 * (c0 - left), 3 * (c1 - left)))
+            np.copyto(frame[r0:r1, 3 * c0 : 3 * c1], self._rgb_list[which][sub], where=self._mask_list[which][sub])
+
+    def paste(
+        self, frames: np.ndarray, slots: np.ndarray, rows: np.ndarray, cols: np.ndarray, which: np.ndarray
+    ) -> None:
+        """Paste sprite ``which[i]`` into frame ``slots[i]`` with its anchor on pixel (rows[i], cols[i]), clipped."""
+        if len(slots) >= self.BATCH_MIN:
+            top, left = rows + self.top, cols + self.left
+            height, width = frames.shape[1], frames.shape[2] // 3
+            # unsigned views: a negative corner becomes huge, so one comparison per axis tests both bounds
+            inside = (top.view(np.uint64) <= height - self.height) & (left.view(np.uint64) <= width - self.width)
+            windows = self._window_view(frames)
+            if inside.all():
+                k, t, c, w = slots, top, left, which
+            else:
+                k, t, c, w = slots[inside], top[inside], left[inside], which[inside]
+            patch = windows[k, t, c]
+            patch &= self.keep[w]  # bitwise compositing: half the cost of copyto(where=) on many small windows
+            patch |= self.ink[w]
+            windows[k, t, c] = patch
+            if inside.all():
+                return
+            outside = ~inside
+            slots, rows, cols, which = slots[outside], rows[outside], cols[outside], which[outside]
+        for k, row, col, w in zip(slots.tolist(), rows.tolist(), cols.tolist(), which.tolist(), strict=True):
+            self.paste_one(frames[k], row, col, w)

@@ -1,0 +1,216 @@
+"""Environment throughput: steps per second of every registered Memory Gym id, ours and (when available) the
+reference memory-gym==1.0.2, side by side in one run.
+
+(a) single: one env through ``gymnasium.make`` (env checker off, as in the reference run), a constant no-op action,
+    ``--episodes`` episodes (episode k reset with seed k), resets included in the timing, construction excluded: the
+    protocol of the paper's Table 2 and of ``scripts/reference_bench.py``. Every id ends its no-op episodes by itself
+    (the Mortar Mayhem family at the first failed check, Mystery Path / Searing Spotlights at their step limits,
+    Endless Mystery Path when the stamina runs out, Endless Searing Spotlights after 160 steps without a coin); the
+    longest, MysteryPath-v0, runs 512 steps per episode. ``--max-total-steps`` (default 100k, as in the reference
+    run) caps a run and cuts it mid-episode if ever reached.
+(b) batched: the native core with 16 and 64 slots driven directly, as the trainer does: ``core.step`` on all slots
+    with a constant no-op action, reset of the finished slots with fresh seeds, and a copy of all observations, for
+    ``--batched-steps`` slot-steps after a short warm-up.
+
+Each measurement is repeated ``--repeats`` times, ours and the reference's (a) interleaved, and the best run is
+kept on both sides: the machine is shared, and the best run is the one least disturbed by other load.
+Ratios: ours/reference for (a), and (b, 64 slots)/reference (a). Results go to ``results/benchmarks/envs.json``.
+
+    python scripts/benchmark_envs.py                       # everything (several minutes with the reference)
+    python scripts/benchmark_envs.py --ids MortarMayhem-v0 --quick --no-reference
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+
+from envs import ENV_IDS, make_core  # noqa: E402
+
+BENCH_IDS = [env_id for env_id in ENV_IDS if env_id != "ProofOfMemory-v0"]
+SLOT_COUNTS = (16, 64)
+
+
+def noop_action(space: gym.Space) -> Any:
+    return 0 if isinstance(space, gym.spaces.Discrete) else np.zeros(space.shape, dtype=space.dtype)
+
+
+def bench_single(env_id: str, episodes: int, max_total_steps: int) -> dict[str, Any]:
+    """(a): one env, constant action, ``episodes`` seeded episodes including their resets."""
+    env = gym.make(env_id, disable_env_checker=True)
+    action = noop_action(env.action_space)
+    steps = done_episodes = 0
+    start = time.perf_counter()
+    for k in range(episodes):
+        env.reset(seed=k)
+        done = False
+        while not done and steps < max_total_steps:
+            _, _, terminated, truncated, _ = env.step(action)
+            steps += 1
+            done = terminated or truncated
+        done_episodes += 1
+        if steps >= max_total_steps:
+            break
+    seconds = time.perf_counter() - start
+    env.close()
+    return {"steps": steps, "episodes": done_episodes, "seconds": seconds, "steps_per_s": steps / seconds}
+
+
+def bench_batched(env_id: str, num_envs: int, slot_steps: int) -> dict[str, Any]:
+    """(b): the core with ``num_envs`` slots: step, reset finished slots with new seeds, fetch the observations."""
+    core = make_core(env_id, num_envs=num_envs)
+    actions = np.stack([np.asarray(noop_action(core.single_action_space))] * num_envs)
+    for k in range(num_envs):
+        core.reset_slot(k, seed=k)
+    next_seed = num_envs
+
+    def run(steps: int) -> tuple[int, int]:
+        nonlocal next_seed
+        done_steps = episodes = 0
+        while done_steps < steps:
+            _, terminated, _ = core.step(actions)
+            for k in np.flatnonzero(terminated):
+                core.reset_slot(int(k), seed=next_seed)
+                next_seed += 1
+                episodes += 1
+            core.observations()
+            done_steps += num_envs
+        return done_steps, episodes
+
+    run(min(slot_steps // 10, 20 * num_envs))  # warm-up: caches, sprite sheets, first allocations
+    start = time.perf_counter()
+    steps, episodes = run(slot_steps)
+    seconds = time.perf_counter() - start
+    return {"steps": steps, "episodes": episodes, "seconds": seconds, "steps_per_s": steps / seconds}
+
+
+def reference_single(env_id: str, episodes: int) -> float | None:
+    """(a) of the reference package, run in its isolated venv (None when that venv does not exist)."""
+    from scripts.reference_traces import run_reference_bench
+
+    result = run_reference_bench([env_id], episodes=episodes)
+    return None if result is None else result.get(env_id)
+
+
+def machine_info() -> dict[str, Any]:
+    import pygame
+
+    def git(*args: str) -> str:
+        try:
+            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+        except (OSError, subprocess.CalledProcessError):
+            return "unknown"
+
+    return {
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "git_revision": git("rev-parse", "HEAD"),
+        "git_dirty": bool(git("status", "--porcelain", "--untracked-files=no")),
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "gymnasium": gym.__version__,
+        "pygame": pygame.version.ver,
+    }
+
+
+def write_json_atomic(path: Path, data: object) -> None:
+    """Write next to the final place, then rename: no half-written file is ever left behind."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False) as f:
+        json.dump(data, f, indent=2, sort_keys=True)
+        f.write("\n")
+    os.replace(f.name, path)
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ids", nargs="+", default=BENCH_IDS, choices=BENCH_IDS, metavar="ID")
+    parser.add_argument("--episodes", type=int, default=100, help="(a): episodes per id")
+    parser.add_argument("--max-total-steps", type=int, default=100_000, help="(a): cap on the steps of one run")
+    parser.add_argument("--batched-steps", type=int, default=64_000, help="(b): slot-steps per measurement")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per measurement; the best is kept")
+    parser.add_argument("--quick", action="store_true", help="smoke run: 3 episodes, 1024 slot-steps, 1 repeat")
+    parser.add_argument("--no-reference", action="store_true", help="do not run the reference package")
+    parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks" / "envs.json")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.episodes, args.batched_steps, args.repeats = 3, 1024, 1
+
+    rows: dict[str, Any] = {}
+    header = f"{'id':30s} {'ours (a)':>10s} {'ref (a)':>10s} {'ratio':>6s} {'b16':>10s} {'b64':>10s} {'b64/ref':>8s}"
+    print(header)
+    for env_id in args.ids:
+        singles, references, batched_runs = [], [], []
+        for _ in range(max(args.repeats, 1)):
+            singles.append(bench_single(env_id, args.episodes, args.max_total_steps))
+            if not args.no_reference:
+                references.append(reference_single(env_id, args.episodes))
+            batched_runs.append({f"b{n}": bench_batched(env_id, n, args.batched_steps) for n in SLOT_COUNTS})
+        single = max(singles, key=lambda run: run["steps_per_s"])
+        batched = {
+            key: max((runs[key] for runs in batched_runs), key=lambda r: r["steps_per_s"]) for key in batched_runs[0]
+        }
+        reference = max((r for r in references if r is not None), default=None)
+        row: dict[str, Any] = {
+            "single": single,
+            **batched,
+            "reference_single_steps_per_s": reference,
+            "runs_steps_per_s": {
+                "single": [run["steps_per_s"] for run in singles],
+                "reference_single": references,
+                **{key: [runs[key]["steps_per_s"] for runs in batched_runs] for key in batched_runs[0]},
+            },
+        }
+        if reference:
+            row["ratio_single"] = single["steps_per_s"] / reference
+            row["ratio_b64_over_reference_single"] = batched["b64"]["steps_per_s"] / reference
+        rows[env_id] = row
+
+        def fmt(value: float | None, width: int = 10, spec: str = ".0f") -> str:
+            return f"{value:{width}{spec}}" if value is not None else f"{'-':>{width}s}"
+
+        print(
+            f"{env_id:30s} {fmt(single['steps_per_s'])} {fmt(reference)} {fmt(row.get('ratio_single'), 6, '.2f')} "
+            f"{fmt(batched['b16']['steps_per_s'])} {fmt(batched['b64']['steps_per_s'])} "
+            f"{fmt(row.get('ratio_b64_over_reference_single'), 8, '.1f')}",
+            flush=True,
+        )
+    report = {
+        "machine": machine_info(),
+        "protocol": {
+            "single": "gymnasium.make, constant no-op action, episode k reset with seed k, resets timed",
+            "batched": "core.step on all slots (constant no-op), finished slots reset with fresh seeds, "
+            "observations copied; after a warm-up",
+            "episodes": args.episodes,
+            "max_total_steps": args.max_total_steps,
+            "batched_slot_steps": args.batched_steps,
+            "quick": args.quick,
+            "repeats": args.repeats,
+            "best_of_repeats": True,
+            "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
+        },
+        "results": rows,
+    }
+    write_json_atomic(args.out, report)
+    return report
+
+
+if __name__ == "__main__":
+    main()
