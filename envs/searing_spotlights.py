@@ -556,7 +556,7 @@ class SearingSpotlightsCore(BatchedCore):
         i64 = np.int64
         for name in (
             "t end_t_now heading next_spawn spawns_left coins_collected coins_left num_coins "
-            "coin_shown_until success exit_x exit_y next_hud"
+            "coin_shown_until special_until success exit_x exit_y next_hud"
         ).split():
             setattr(self, name, np.zeros(n, i64))
         self.pos = np.zeros((n, 2), i64)  # agent centre (x, y)
@@ -721,6 +721,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.spawns_left[k] = 0 if self.endless else opts["num_spawns"]
         self.coins_collected[k] = self.success[k] = 0
         self.coin_shown_until[k] = record["coin_show_duration"]
+        self.special_until[k] = NEVER if record["any_visible"] else self.coin_shown_until[k] if self.endless else 0
         self.exit_open[k] = False
         mask = np.zeros((SCREEN, SCREEN), bool)
         self.heading[k] = int(rng.integers(0, 8))  # heading index (x 45 degrees): what rng.choice draws
@@ -877,6 +878,8 @@ class SearingSpotlightsCore(BatchedCore):
                 self.coins_collected[k] += 1
                 zero_t = int(self.t[k]) - 1
                 self.coin_shown_until[k] = zero_t + int(self.coin_show_duration[k])
+                if not self.any_visible[k]:
+                    self.special_until[k] = self.coin_shown_until[k]
                 per_coin = int(self.steps_per_coin[k])
                 self.end_t_now[k] = min(int(self.end_t[k]), NEVER if per_coin == NEVER else zero_t + per_coin)
                 terminated[i] = self.t[k] == self.end_t_now[k]
@@ -1112,10 +1115,8 @@ class SearingSpotlightsCore(BatchedCore):
         ``out`` holds the frames of the slots ``idx`` followed by a scratch frame.
         """
         slots = self.all_slots[idx]
-        if self.endless:
-            special = np.flatnonzero(self.any_visible[idx] | (self.t[idx] < self.coin_shown_until[idx]))
-        elif self.any_visible.any():
-            special = np.flatnonzero(self.any_visible[idx])
+        if self.endless or self.any_visible.any():  # slots drawing an entity above the darkness
+            special = np.flatnonzero(self.t[idx] < self.special_until[idx])
         else:
             special = ()
         for i in special:
@@ -1190,8 +1191,8 @@ class SearingSpotlightsCore(BatchedCore):
     def _step_info(self, k: int) -> dict[str, Any]:
         if not self.endless:
             return {}
-        position = np.array([self.x[k], self.y[k], self.coin_x[k, 0], self.coin_y[k, 0]], dtype=np.float64)
-        return {"ground_truth": position / SCREEN}
+        position = [self.pos.item(k, 0), self.pos.item(k, 1), self.coin_x.item(k, 0), self.coin_y.item(k, 0)]
+        return {"ground_truth": np.divide(position, float(SCREEN))}  # float64, as in the reference
 
     def _debug_frame(self, k: int) -> np.ndarray:
         """Floor, the darkness with the last step's holes, then exit, coins, agent and HUD above it."""
