@@ -24,12 +24,10 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -41,6 +39,7 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 from envs import ENV_IDS, make_core  # noqa: E402
+from scripts.io_utils import write_json_atomic  # noqa: E402
 
 BENCH_IDS = [env_id for env_id in ENV_IDS if env_id != "ProofOfMemory-v0"]
 SLOT_COUNTS = (16, 64)
@@ -128,15 +127,6 @@ def machine_info() -> dict[str, Any]:
         "gymnasium": gym.__version__,
         "pygame": pygame.version.ver,
     }
-
-
-def write_json_atomic(path: Path, data: object) -> None:
-    """Write next to the final place, then rename: no half-written file is ever left behind."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False) as f:
-        json.dump(data, f, indent=2, sort_keys=True)
-        f.write("\n")
-    os.replace(f.name, path)
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
