@@ -123,9 +123,9 @@ class BatchedCore:
 
     def agent_frame(self, k: int) -> np.ndarray:
         """The 84x84 agent view of slot ``k`` (the visual observation)."""
-        obs = self._observation(np.array([k]))
+        obs = self._observation(slice(None))  # views of all slots (not a gathered copy of one), copied once below
         image = obs["visual_observation"] if isinstance(obs, dict) else obs
-        return np.array(image[0])
+        return np.array(image[k])
 
     def render_fps(self, k: int) -> int:
         """Frames per second of the human window (some envs slow down while showing clues)."""
