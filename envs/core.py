@@ -32,77 +32,13 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from envs.options import Option, resolve_options
+from envs.rng import seeded_generator
+
+__all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_core", "seeded_generator"]
 
 Index = slice | np.ndarray
 RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
 DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
-
-
-def seeded_generator(seed: int) -> np.random.Generator:
-    """The generator the reference builds for ``reset(seed=s)``: PCG64 over a SeedSequence of the seed."""
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed)))
-
-
-_WORD = 1 << 32
-
-
-class BoundedDraws:
-    """``rng.integers(0, high)`` values (so also ``rng.choice`` of lists) one by one, from bulk draws of raw words.
-
-    numpy draws a bounded int below ``high <= 2**32`` with Lemire's method on 32-bit words: one word, unless a
-    (very rare) rejection asks for another, and no word at all for ``high == 1``. Emulating that on words drawn in
-    bulk gives the same values and leaves the generator in the same state as the scalar calls, at a fraction of
-    their cost. ``reserve(n)`` draws n words at once: only reserve words that ``below`` will certainly use (each
-    call with ``high > 1`` uses at least one); if they run short (a rejection), more are drawn one by one.
-
-    A 32-bit word is the low half of a fresh 64-bit output, or the high half that the previous word left over in
-    the bit generator. With ``fresh=True`` (a generator that has drawn nothing yet, so holds no leftover half) the
-    words come from 64-bit outputs (``random_raw``, the cheapest call), and the leftover half is tracked here;
-    otherwise numpy's own 32-bit bulk call draws them.
-    """
-
-    __slots__ = ("rng", "words", "used", "raw", "buffered")
-
-    def __init__(self, rng: np.random.Generator, reserve: int = 0, fresh: bool = False) -> None:
-        self.rng, self.words, self.used, self.raw, self.buffered = rng, [], 0, fresh, False
-        self.reserve(reserve)
-
-    def _word(self) -> int:
-        """One word through numpy itself, which keeps any leftover half in the bit generator."""
-        self.buffered = not self.buffered
-        return int(self.rng.integers(0, _WORD, dtype=np.uint32))
-
-    def reserve(self, count: int) -> None:
-        if count <= 0:
-            return
-        if not self.raw:
-            self.words += self.rng.integers(0, _WORD, size=count, dtype=np.uint32).tolist()
-            return
-        if self.buffered:
-            self.words.append(self._word())
-            count -= 1
-        if count >= 2:
-            for raw in self.rng.bit_generator.random_raw(count // 2).tolist():
-                self.words += (raw & (_WORD - 1), raw >> 32)  # low half first, as numpy's next_uint32 does
-        if count % 2:
-            self.words.append(self._word())
-
-    def below(self, high: int) -> int:
-        if high <= 1:
-            return 0
-        while True:
-            if self.used == len(self.words):
-                self.words.append(self._word())
-            product = self.words[self.used] * high
-            self.used += 1
-            low_bits = product & (_WORD - 1)
-            if low_bits >= high or low_bits >= (_WORD - high) % high:
-                return product >> 32
-
-    def close(self) -> None:
-        """Check that every reserved word was used (otherwise the generator ran ahead of the reference)."""
-        if self.used != len(self.words):
-            raise RuntimeError(f"{len(self.words) - self.used} reserved random words were not used")
 
 
 class BatchedCore:
@@ -187,9 +123,9 @@ class BatchedCore:
 
     def agent_frame(self, k: int) -> np.ndarray:
         """The 84x84 agent view of slot ``k`` (the visual observation)."""
-        obs = self._observation(np.array([k]))
+        obs = self._observation(slice(None))  # views of all slots (not a gathered copy of one), copied once below
         image = obs["visual_observation"] if isinstance(obs, dict) else obs
-        return np.array(image[0])
+        return np.array(image[k])
 
     def render_fps(self, k: int) -> int:
         """Frames per second of the human window (some envs slow down while showing clues)."""

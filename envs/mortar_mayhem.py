@@ -32,10 +32,11 @@ import gymnasium as gym
 import numpy as np
 import pygame
 
-from envs.core import BatchedCore, BoundedDraws, Index
+from envs.core import BatchedCore, Index
 from envs.drawing import SCREEN, Sprite, SpriteSheet, agent_sprites, round_half_away, surface_to_sprite
 from envs.movement import clamp_centre, continuous_heading, continuous_velocity, grid_step
 from envs.options import Option
+from envs.rng import BoundedDraws
 
 # The fixed command list (generation order), its tile offsets, and where each command sits in the one-hot vector.
 COMMANDS = ("right", "down", "left", "up", "stay", "right_down", "right_up", "left_down", "left_up")
@@ -642,7 +643,7 @@ class MortarMayhemCore(BatchedCore):
         """Endless: after a round's last check, append one command and show only its icon; the tiles stay lethal."""
         count = int(self.num_commands[k])
         self._ensure_commands(count + 1)
-        command = BoundedDraws(self.rngs[k], 1).below(int(self.allowed[k]))
+        command = int(self.rngs[k].integers(0, int(self.allowed[k])))  # one draw: numpy's own call is cheapest
         self.commands[k, count] = command
         self.num_commands[k] = count + 1
         self.current[k] = 0

@@ -765,21 +765,29 @@ class MysteryPathCore(BatchedCore):
     def _draw_slot(self, k: int) -> None:
         """Draw the agent view of slot ``k`` (the picture of :meth:`_draw`, one slot at a time)."""
         frame = self.canvas.view[k]
-        x, y = self.pos[k].tolist()
-        half = int(self.half[k])
         if self.endless:
             self._draw_floor_slot(k, frame)
             left = int(self.agent_screen_left[k])
         else:
             frame[:] = self.background[k]
-            left = x - half
-        self.agents.sprites[int(self.sprite0[k]) + int(self.heading[k]) // 45].paste(frame, y - half, left)
+            left = int(self.pos[k, 0] - self.half[k])
+        self._paste_agent_slot(k, frame, left)
         if self.endless and self.show_stamina[k]:
             frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
         if self.cross_visible[k]:
-            cross = self.crosses.sprites[self.cross_id]
-            centre_x, centre_y = self._cross_centres(k)
-            cross.paste(frame, int(centre_y) - cross.height // 2, int(centre_x) - cross.width // 2)
+            self._paste_cross_slot(k, frame)
+
+    def _paste_agent_slot(self, k: int, frame: np.ndarray, left: int) -> None:
+        """Paste slot ``k``'s agent into ``frame`` with its sprite's left edge at column ``left``."""
+        half = int(self.half[k])
+        sprite = self.agents.sprites[int(self.sprite0[k]) + int(self.heading[k]) // 45]
+        sprite.paste(frame, int(self.pos[k, 1]) - half, left)
+
+    def _paste_cross_slot(self, k: int, frame: np.ndarray) -> None:
+        """Paste the fall-off cross of slot ``k`` into ``frame``, centred on :meth:`_cross_centres`."""
+        cross = self.crosses.sprites[self.cross_id]
+        centre_x, centre_y = self._cross_centres(k)
+        cross.paste(frame, int(centre_y) - cross.height // 2, int(centre_x) - cross.width // 2)
 
     def _draw_floor_slot(self, k: int, frame: np.ndarray) -> None:
         """The endless floor of slot ``k``: black or ice, then the path tiles behind the agent."""
@@ -886,7 +894,6 @@ class MysteryPathCore(BatchedCore):
         """Ground truth: the whole level (path white, origin blue, goal green, walls red) or, in the endless
         variant, every generated path tile at alpha 200 and the stamina bar; plus the agent and the cross."""
         frame = np.zeros((SCREEN, SCREEN, 3), dtype=np.uint8)
-        x, y = (int(v) for v in self.pos[k])
         if self.endless:
             if self.show_background[k]:
                 frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
@@ -906,12 +913,10 @@ class MysteryPathCore(BatchedCore):
             _fill_tile(frame, goal, GOAL_COLOUR)
             for tile in layout.walls:
                 _fill_tile(frame, tile, WALL_COLOUR)
-            left = x - int(self.half[k])
-        self.agents.sprites[int(self.sprite0[k] + self.heading[k] // 45)].paste(frame, y - int(self.half[k]), left)
+            left = int(self.pos[k, 0] - self.half[k])
+        self._paste_agent_slot(k, frame, left)
         if self.cross_visible[k]:
-            cross = self.crosses.sprites[self.cross_id]
-            centre_x, centre_y = self._cross_centres(k)
-            cross.paste(frame, int(centre_y) - cross.height // 2, int(centre_x) - cross.width // 2)
+            self._paste_cross_slot(k, frame)
         if self.endless:
             frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
         return frame

@@ -37,12 +37,13 @@ from functools import cache
 
 import numpy as np
 
+from envs.rng import BoundedDraws
+
 Tile = tuple[int, int]
 
 WALL_PERCENT = 33  # an inner tile is a wall when integers(0, 100) < 33
 BORDER_WALL_COUNTS = (4, 8)
 COST_LOW, COST_HIGH = 1, 9  # step costs: integers(1, 9), i.e. 1..8
-_UINT32 = 1 << 32
 
 
 @dataclass(frozen=True)
@@ -51,67 +52,6 @@ class MysteryPathLayout:
 
     path: tuple[Tile, ...]
     walls: tuple[Tile, ...]
-
-
-class _Draws:
-    """``rng.integers(0, n)`` for small ``n``, exactly as numpy draws it, without numpy's cost per call.
-
-    A level takes about 70 small draws, and numpy spends far longer per call than the draw itself. For a range
-    below 2**32 numpy's ``Generator.integers`` uses one 32-bit output of the bit generator per draw and Lemire's
-    multiply-shift method (redrawing in the rare biased case); PCG64 hands out the low, then the high half of each
-    64-bit output and keeps an unused high half in its state. This class reads 64-bit outputs ahead in blocks, makes
-    the same draws, and :meth:`close` leaves the generator exactly where drawing one value at a time would have.
-    (Tests compare it with ``Generator.integers`` draw for draw.)
-    """
-
-    BLOCK = 48  # 64-bit outputs read at a time (most levels need one block)
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        if not isinstance(rng.bit_generator, np.random.PCG64):
-            raise TypeError(f"the path generator reproduces PCG64 streams; got {type(rng.bit_generator).__name__}")
-        self.bit_generator = rng.bit_generator
-        self.saved = self.bit_generator.state
-        self.values: list[int] = [self.saved["uinteger"]] if self.saved["has_uint32"] else []
-        self.buffered = len(self.values)  # a high half left over in the generator's state
-        self.used = 0
-
-    def read_ahead(self) -> None:
-        """Append the 32-bit outputs of the next block of 64-bit outputs to ``values`` (low half first)."""
-        words = self.bit_generator.random_raw(self.BLOCK)
-        self.values += words.astype("<u8", copy=False).view("<u4").tolist()
-
-    def below(self, n: int, count: int = 1) -> list[int]:
-        """The values of ``count`` calls ``rng.integers(0, n)``, for 1 <= n < 2**32."""
-        if n == 1:
-            return [0] * count  # numpy draws nothing when there is only one choice
-        values, used, out = self.values, self.used, []
-        threshold = (_UINT32 - n) % n  # Lemire: a low part below this would bias the result, so redraw
-        while len(out) < count:
-            if used == len(values):
-                self.read_ahead()
-            scaled = values[used] * n
-            used += 1
-            low = scaled & (_UINT32 - 1)
-            if low >= n or low >= threshold:
-                out.append(scaled >> 32)
-        self.used = used
-        return out
-
-    def close(self) -> None:
-        """Rewind the generator to just after the 32-bit outputs that were used."""
-        if len(self.values) == self.buffered and self.used == 0:
-            return
-        state = dict(self.saved)
-        from_words = self.used - self.buffered
-        words = (from_words + 1) // 2 if from_words > 0 else 0
-        if from_words > 0:
-            state["has_uint32"] = from_words % 2
-            state["uinteger"] = self.values[self.buffered + 2 * words - 1]
-        elif self.used:
-            state["has_uint32"] = 0
-        self.bit_generator.state = state  # random_raw below advances the 64-bit state and keeps this half
-        if words:
-            self.bit_generator.random_raw(words)
 
 
 @dataclass(frozen=True)
@@ -161,20 +101,20 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
     end = int(goal[0]) * grid.height + int(goal[1])
     n = grid.width * grid.height
 
-    draws = _Draws(rng)
+    draws = BoundedDraws(rng)  # the number of draws depends on the search: read ahead, rewind at the end
 
     # 1. Inner walls (a bit mask, and a list in the order they were made).
     inner = grid.inner
-    walls = [tile for tile, draw in zip(inner, draws.below(100, len(inner)), strict=True) if draw < WALL_PERCENT]
+    walls = [tile for tile, draw in zip(inner, draws.below_many(100, len(inner)), strict=True) if draw < WALL_PERCENT]
     wall_bits = sum(1 << tile for tile in walls)
 
     # 2. Border walls.
     excluded = grid.near[start] | grid.near[end]
     surrounding = grid.surrounding
     candidates = [t for t in grid.border if not (excluded >> t) & 1 and not surrounding[t] & wall_bits]
-    for _ in range(BORDER_WALL_COUNTS[draws.below(len(BORDER_WALL_COUNTS))[0]]):
+    for _ in range(BORDER_WALL_COUNTS[draws.below(len(BORDER_WALL_COUNTS))]):
         if candidates:
-            tile = candidates.pop(draws.below(len(candidates))[0])
+            tile = candidates.pop(draws.below(len(candidates)))
             wall_bits |= 1 << tile
             walls.append(tile)
 
@@ -191,7 +131,7 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
     # The step costs integers(1, 9) are read inline from the 32-bit outputs: for a range of 8 numpy's method is
     # "the top 3 bits" and never redraws.
     assert COST_HIGH - COST_LOW == 8
-    values, used = draws.values, draws.used
+    words, used = draws.words, draws.used
     while open_list:
         head = f[open_list[0]]
         pick = 0
@@ -204,14 +144,14 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
             break
         del open_list[pick]
         state[current] = 2
-        if used + 4 > len(values):  # enough outputs for every neighbour
+        if used + 4 > len(words):  # enough words for every neighbour
             draws.read_ahead()
         g_current = g[current] + COST_LOW
         for tile in neighbours[current]:
             seen = state[tile]
             if seen == 2:
                 continue
-            cost = g_current + (values[used] >> 29)
+            cost = g_current + (words[used] >> 29)
             used += 1
             if seen:
                 if cost < g[tile]:

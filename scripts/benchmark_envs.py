@@ -24,12 +24,10 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -41,6 +39,8 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 from envs import ENV_IDS, make_core  # noqa: E402
+from scripts.bench_protocol import time_constant_action_episodes  # noqa: E402
+from scripts.io_utils import write_json_atomic  # noqa: E402
 
 BENCH_IDS = [env_id for env_id in ENV_IDS if env_id != "ProofOfMemory-v0"]
 SLOT_COUNTS = (16, 64)
@@ -53,22 +53,9 @@ def noop_action(space: gym.Space) -> Any:
 def bench_single(env_id: str, episodes: int, max_total_steps: int) -> dict[str, Any]:
     """(a): one env, constant action, ``episodes`` seeded episodes including their resets."""
     env = gym.make(env_id, disable_env_checker=True)
-    action = noop_action(env.action_space)
-    steps = done_episodes = 0
-    start = time.perf_counter()
-    for k in range(episodes):
-        env.reset(seed=k)
-        done = False
-        while not done and steps < max_total_steps:
-            _, _, terminated, truncated, _ = env.step(action)
-            steps += 1
-            done = terminated or truncated
-        done_episodes += 1
-        if steps >= max_total_steps:
-            break
-    seconds = time.perf_counter() - start
+    result = time_constant_action_episodes(env, noop_action(env.action_space), episodes, max_total_steps)
     env.close()
-    return {"steps": steps, "episodes": done_episodes, "seconds": seconds, "steps_per_s": steps / seconds}
+    return result
 
 
 def bench_batched(env_id: str, num_envs: int, slot_steps: int) -> dict[str, Any]:
@@ -128,15 +115,6 @@ def machine_info() -> dict[str, Any]:
         "gymnasium": gym.__version__,
         "pygame": pygame.version.ver,
     }
-
-
-def write_json_atomic(path: Path, data: object) -> None:
-    """Write next to the final place, then rename: no half-written file is ever left behind."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False) as f:
-        json.dump(data, f, indent=2, sort_keys=True)
-        f.write("\n")
-    os.replace(f.name, path)
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:

@@ -6,26 +6,15 @@ Usage: python scripts/parity_report.py [--out results/parity.json]
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from envs import ENV_IDS  # noqa: E402
+from scripts.io_utils import write_json_atomic  # noqa: E402
 from tests.parity import REFERENCE_IDS, replay  # noqa: E402
-
-
-def write_json_atomic(path: Path, data: object) -> None:
-    """Write JSON next to its final place, then rename, so no half-written file is ever left behind."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False) as f:
-        json.dump(data, f, indent=2, sort_keys=True)
-        f.write("\n")
-    os.replace(f.name, path)
 
 
 def main() -> None:

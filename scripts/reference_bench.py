@@ -16,11 +16,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 
 import gymnasium as gym
 import memory_gym  # noqa: F401  (registers the ids)
 
+from scripts.bench_protocol import time_constant_action_episodes
 from scripts.reference_traces import ALL_IDS
 
 
@@ -28,20 +28,7 @@ def bench(env_id: str, episodes: int = 100, max_total_steps: int = 100_000) -> d
     """Time ``episodes`` constant-action episodes (resets included) on one instance of ``env_id``."""
     env = gym.make(env_id, disable_env_checker=True)
     action = 0 if isinstance(env.action_space, gym.spaces.Discrete) else [0, 0]
-    steps = done_episodes = 0
-    start = time.perf_counter()
-    for k in range(episodes):
-        env.reset(seed=k)
-        done = False
-        while not done and steps < max_total_steps:
-            _, _, terminated, truncated, _ = env.step(action)
-            steps += 1
-            done = terminated or truncated
-        done_episodes += 1
-        if steps >= max_total_steps:
-            break
-    seconds = time.perf_counter() - start
-    return {"id": env_id, "steps": steps, "seconds": seconds, "steps_per_s": steps / seconds, "episodes": done_episodes}
+    return {"id": env_id, **time_constant_action_episodes(env, action, episodes, max_total_steps)}
 
 
 def main(argv: list[str] | None = None) -> None:

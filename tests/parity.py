@@ -15,21 +15,11 @@ from typing import Any
 import gymnasium as gym
 
 import envs  # noqa: F401  (registers the ids)
+from scripts.reference_traces import ALL_IDS
 from scripts.trace_format import load_traces, obs_digest
 
 TRACE_ROOT = Path(__file__).parent / "data" / "traces"
-REFERENCE_IDS = [
-    "MortarMayhem-v0",
-    "MortarMayhem-Grid-v0",
-    "MortarMayhemB-v0",
-    "MortarMayhemB-Grid-v0",
-    "MysteryPath-v0",
-    "MysteryPath-Grid-v0",
-    "SearingSpotlights-v0",
-    "Endless-MortarMayhem-v0",
-    "Endless-MysteryPath-v0",
-    "Endless-SearingSpotlights-v0",
-]
+REFERENCE_IDS = ALL_IDS  # the ids with recorded traces: every Memory Gym id
 
 
 @dataclass

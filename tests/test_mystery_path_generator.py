@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import envs
-from envs.core import seeded_generator
-from envs.mystery_path_generator import _Draws, generate_path
+from envs.mystery_path_generator import generate_path
+from envs.rng import seeded_generator
 from scripts.trace_format import load_mp_paths
 
 GRID = 7
@@ -94,37 +94,3 @@ def test_generator_leaves_the_rng_where_one_draw_at_a_time_would() -> None:
         assert rng.bit_generator.state == again.bit_generator.state
     with pytest.raises(TypeError, match="PCG64"):
         generate_path(np.random.Generator(np.random.Philox(0)), GRID, GRID, (0, 3), (6, 4))
-
-
-@pytest.mark.parametrize("buffered", [False, True])
-def test_bounded_draws_equal_numpy_integers(buffered: bool) -> None:
-    sizes = [1, 2, 3, 7, 8, 13, 100, 2**31 + 5, 3_000_000_000]
-    plan = np.random.default_rng(1)
-    for seed in range(400):
-        ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
-        if buffered:  # leave an unused 32-bit half in the generator's state
-            ours.integers(0, 5)
-            theirs.integers(0, 5)
-        ranges = plan.choice(sizes, size=int(plan.integers(0, 200))).tolist()
-        draws = _Draws(ours)
-        got = [draws.below(n)[0] for n in ranges]
-        draws.close()
-        assert got == [int(theirs.integers(0, n)) for n in ranges], seed
-        assert ours.bit_generator.state == theirs.bit_generator.state, seed
-
-
-@pytest.mark.parametrize("rejected", [0, 42_949_673])
-def test_bounded_draws_redraw_like_numpy_in_the_biased_case(rejected: int) -> None:
-    # For n = 100 numpy redraws when the low 32 bits of x * 100 are below (2**32 - 100) % 100 = 96 (probability
-    # 2e-8). Put such an x into the generator's buffered 32-bit half, so that it is the next output drawn.
-    assert ((rejected * 100) & 0xFFFFFFFF) < 96
-    for seed in range(20):
-        ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
-        state = ours.bit_generator.state
-        state.update(has_uint32=1, uinteger=rejected)
-        ours.bit_generator.state = theirs.bit_generator.state = state
-        draws = _Draws(ours)
-        got = draws.below(100, 3)
-        draws.close()
-        assert got == theirs.integers(0, 100, size=3).tolist()
-        assert ours.bit_generator.state == theirs.bit_generator.state

@@ -1,0 +1,151 @@
+"""Random numbers exactly as the reference draws them, at a fraction of numpy's cost per call.
+
+Every slot owns the generator the reference builds for ``reset(seed=s)`` (:func:`seeded_generator`). Level
+generation makes dozens of small bounded draws (``rng.integers(0, n)``, ``rng.choice(list)``) per reset, and numpy
+spends microseconds on each call whatever its size. :class:`BoundedDraws` makes the same draws from 32-bit words
+fetched in bulk and leaves the generator in exactly the state the one-by-one calls would have left it, so later
+draws (the next level, the next episode of a continuing generator) stay identical to the reference's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_WORD = 1 << 32
+
+
+def seeded_generator(seed: int) -> np.random.Generator:
+    """The generator the reference builds for ``reset(seed=s)``: PCG64 over a SeedSequence of the seed."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed)))
+
+
+class BoundedDraws:
+    """``rng.integers(0, high)`` values (so also ``rng.choice`` of lists) one by one, from words drawn in bulk.
+
+    Why it is exact: for ``high <= 2**32`` numpy draws a bounded int with Lemire's method on 32-bit words: one word,
+    unless a (very rare) biased product asks for another, and no word at all for ``high == 1``. PCG64 hands out
+    the low, then the high half of each 64-bit output and keeps an unused high half in its state
+    (``has_uint32``/``uinteger``). Emulating both on bulk words gives numpy's values and numpy's generator state.
+
+    Two ways to get the words (both may be used on one object):
+
+    * exact: ``reserve(n)`` draws n words that ``below`` will certainly use (each call with ``high > 1`` uses at
+      least one); if they run short (a rejection), more are drawn one by one. The generator is never ahead, so
+      nothing is rewound. With ``fresh=True`` (a generator that has drawn nothing, so holds no leftover half) the
+      generator's state need not even be read.
+    * read-ahead: when the number of draws is not known in advance, ``read_ahead`` (also called by ``below`` when
+      no words are left) fetches a block of 64-bit outputs; :meth:`close` then rewinds the generator to just after
+      the words that were used. Callers with a hot loop may read ``words[used]`` themselves (advancing ``used``)
+      after making sure, with ``read_ahead``, that enough words are there.
+
+    Call :meth:`close` after the last draw.
+    """
+
+    BLOCK = 48  # 64-bit outputs fetched per read-ahead (most Mystery Path levels need one block)
+
+    __slots__ = ("rng", "bit_generator", "words", "used", "buffered", "_state", "saved", "mark")
+
+    def __init__(self, rng: np.random.Generator, reserve: int = 0, fresh: bool = False) -> None:
+        if not isinstance(rng.bit_generator, np.random.PCG64):
+            raise TypeError(f"BoundedDraws reproduces PCG64 streams; got {type(rng.bit_generator).__name__}")
+        self.rng, self.bit_generator = rng, rng.bit_generator
+        self.words: list[int] = []
+        self.used = 0
+        # The generator's state while nothing has been drawn here (read-ahead reuses it), and whether it holds a
+        # leftover half word that numpy would hand out next.
+        self._state = None if fresh else self.bit_generator.state
+        self.buffered = False if fresh else bool(self._state["has_uint32"])
+        self.saved: dict | None = None  # the state before the first read-ahead: close() rewinds from it
+        self.mark = 0  # words obtained exactly, before the first read-ahead
+        self.reserve(reserve)
+
+    def _word(self) -> int:
+        """One word through numpy itself, which keeps any leftover half in the bit generator."""
+        self.buffered = not self.buffered
+        self._state = None
+        return int(self.rng.integers(0, _WORD, dtype=np.uint32))
+
+    def reserve(self, count: int) -> None:
+        """Make ``count`` more words available, drawing only words that will certainly be used (see the class)."""
+        if count <= 0:
+            return
+        if self.saved is not None:  # reading ahead already: the generator is ahead anyway
+            while len(self.words) - self.used < count:
+                self.read_ahead()
+            return
+        if self.buffered:
+            self.words.append(self._word())
+            count -= 1
+        if count >= 2:
+            self._state = None
+            for raw in self.bit_generator.random_raw(count // 2).tolist():
+                self.words += (raw & (_WORD - 1), raw >> 32)  # low half first, as numpy's next_uint32 does
+        if count % 2:
+            self.words.append(self._word())
+
+    def read_ahead(self, outputs: int = BLOCK) -> None:
+        """Append the words of the next ``outputs`` 64-bit outputs (low half first); :meth:`close` rewinds."""
+        if self.saved is None:
+            self.saved = self._state if self._state is not None else self.bit_generator.state
+            self.mark = len(self.words)
+            if self.saved["has_uint32"]:  # the leftover half comes first
+                self.words.append(self.saved["uinteger"])
+        self.words += self.bit_generator.random_raw(outputs).astype("<u8", copy=False).view("<u4").tolist()
+
+    def below(self, high: int) -> int:
+        """The value of ``rng.integers(0, high)``, for ``1 <= high <= 2**32``."""
+        if high <= 1:
+            return 0  # numpy draws nothing when there is only one choice
+        words = self.words
+        while True:
+            if self.used == len(words):
+                if self.saved is None:
+                    words.append(self._word())
+                else:
+                    self.read_ahead()
+            product = words[self.used] * high
+            self.used += 1
+            low_bits = product & (_WORD - 1)
+            # Lemire: a low part below (2**32 - high) % high would bias the result, so numpy draws again
+            if low_bits >= high or low_bits >= (_WORD - high) % high:
+                return product >> 32
+
+    def below_many(self, high: int, count: int) -> list[int]:
+        """The values of ``count`` calls ``rng.integers(0, high)``, fetching words by read-ahead when needed."""
+        if high <= 1:
+            return [0] * count
+        words, used, out = self.words, self.used, []
+        threshold = (_WORD - high) % high
+        while len(out) < count:
+            if used == len(words):
+                self.used = used
+                self.read_ahead()
+            product = words[used] * high
+            used += 1
+            low_bits = product & (_WORD - 1)
+            if low_bits >= high or low_bits >= threshold:
+                out.append(product >> 32)
+        self.used = used
+        return out
+
+    def close(self) -> None:
+        """Check that every exactly drawn word was used, and rewind whatever was read ahead but not used."""
+        if self.used < self.mark or (self.saved is None and self.used != len(self.words)):
+            raise RuntimeError(f"{len(self.words) - self.used} reserved random words were not used")
+        if self.saved is None:
+            return
+        buffered = int(self.saved["has_uint32"])  # the leftover half was the first word read ahead
+        read = self.used - self.mark  # words used since the first read-ahead
+        if read == 0 and len(self.words) == self.mark + buffered:
+            return  # nothing was read or used: the generator is where it was
+        state = dict(self.saved)
+        from_outputs = read - buffered
+        outputs = (from_outputs + 1) // 2 if from_outputs > 0 else 0
+        if from_outputs > 0:
+            state["has_uint32"] = from_outputs % 2
+            state["uinteger"] = self.words[self.mark + buffered + 2 * outputs - 1]  # the last output's high half
+        elif read:
+            state["has_uint32"] = 0  # only the leftover half was used
+        self.bit_generator.state = state  # random_raw below advances the 64-bit state and keeps this half
+        if outputs:
+            self.bit_generator.random_raw(outputs)

@@ -1,0 +1,115 @@
+"""``BoundedDraws`` must give exactly the values and generator state of numpy's one-by-one bounded draws."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from envs.rng import BoundedDraws, seeded_generator
+
+
+def live_state(rng: np.random.Generator) -> dict:
+    """The bit generator's state without the leftover half word when none is held (numpy leaves a stale value)."""
+    state = dict(rng.bit_generator.state)
+    if not state["has_uint32"]:
+        state["uinteger"] = None
+    return state
+
+
+@pytest.mark.parametrize("seed", range(0, 400, 7))
+def test_reserved_draws_match_numpy(seed: int) -> None:
+    plan_rng = np.random.default_rng(seed)
+    # small ranges (the environments' case), ranges of 1 (no draw), and huge ranges that reject often
+    plan = [[int(h) for h in plan_rng.integers(1, 40, plan_rng.integers(0, 9))] for _ in range(5)]
+    plan[seed % 5] += [3_000_000_000, 2_500_000_001, 1, 4_000_000_000, 2**32]
+    ours, theirs = seeded_generator(seed), seeded_generator(seed)
+    for i, part in enumerate(plan):
+        draws = BoundedDraws(ours, sum(h > 1 for h in part), fresh=i == 0)
+        got = [draws.below(h) for h in part]
+        if part and plan_rng.random() < 0.5:  # a second reservation in the same object
+            draws.reserve(1)
+            got.append(draws.below(7))
+            part = [*part, 7]
+        draws.close()
+        assert got == [int(theirs.integers(0, h)) for h in part]
+        if plan_rng.random() < 0.5:  # numpy's own calls in between (a continuing generator)
+            assert int(ours.integers(0, 9)) == int(theirs.integers(0, 9))
+        assert live_state(ours) == live_state(theirs)
+    assert ours.choice([3, 4, 5]) == theirs.choice([3, 4, 5])
+
+
+def test_choice_consumes_like_bounded_draws() -> None:
+    ours, theirs = seeded_generator(3), seeded_generator(3)
+    draws = BoundedDraws(ours, 2, fresh=True)
+    values = [[10, 20, 30][draws.below(3)], [7][draws.below(1)], [1, 2][draws.below(2)]]
+    draws.close()
+    assert values == [theirs.choice([10, 20, 30]), theirs.choice([7]), theirs.choice([1, 2])]
+    assert live_state(ours) == live_state(theirs)
+
+
+def test_unused_reserved_words_are_an_error() -> None:
+    draws = BoundedDraws(seeded_generator(0), 3)
+    draws.below(5)
+    with pytest.raises(RuntimeError, match="not used"):
+        draws.close()
+
+
+@pytest.mark.parametrize("buffered", [False, True])
+def test_read_ahead_draws_equal_numpy_and_rewind(buffered: bool) -> None:
+    sizes = [1, 2, 3, 7, 8, 13, 100, 2**31 + 5, 3_000_000_000]
+    plan = np.random.default_rng(1)
+    for seed in range(400):
+        ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+        if buffered:  # leave an unused 32-bit half in the generator's state
+            ours.integers(0, 5)
+            theirs.integers(0, 5)
+        ranges = plan.choice(sizes, size=int(plan.integers(0, 200))).tolist()
+        draws = BoundedDraws(ours)
+        if seed % 2:
+            got = [value for n in ranges for value in draws.below_many(n, 1)]
+        else:
+            draws.read_ahead(int(plan.integers(1, 4)))  # small blocks: below must read ahead again
+            got = [draws.below(n) for n in ranges]
+        draws.close()
+        assert got == [int(theirs.integers(0, n)) for n in ranges], seed
+        assert ours.bit_generator.state == theirs.bit_generator.state, seed  # the stale half included
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_reserved_then_read_ahead_in_one_object(seed: int) -> None:
+    plan = np.random.default_rng(seed + 1000)
+    ours, theirs = seeded_generator(seed), seeded_generator(seed)
+    if seed % 3 == 0:
+        ours.integers(0, 5)
+        theirs.integers(0, 5)
+    exact = plan.integers(2, 30, int(plan.integers(0, 6))).tolist()
+    ahead = plan.integers(1, 30, int(plan.integers(0, 120))).tolist()
+    draws = BoundedDraws(ours, len(exact), fresh=seed % 3 != 0 and seed % 2 == 0)
+    got = [draws.below(h) for h in exact]
+    draws.read_ahead(1)
+    got += [draws.below(h) for h in ahead]
+    draws.close()
+    assert got == [int(theirs.integers(0, h)) for h in exact + ahead]
+    assert live_state(ours) == live_state(theirs)
+
+
+@pytest.mark.parametrize("rejected", [0, 42_949_673])
+def test_read_ahead_redraws_like_numpy_in_the_biased_case(rejected: int) -> None:
+    # For n = 100 numpy redraws when the low 32 bits of x * 100 are below (2**32 - 100) % 100 = 96 (probability
+    # 2e-8). Put such an x into the generator's buffered 32-bit half, so that it is the next output drawn.
+    assert ((rejected * 100) & 0xFFFFFFFF) < 96
+    for seed in range(20):
+        ours, theirs = np.random.default_rng(seed), np.random.default_rng(seed)
+        state = ours.bit_generator.state
+        state.update(has_uint32=1, uinteger=rejected)
+        ours.bit_generator.state = theirs.bit_generator.state = state
+        draws = BoundedDraws(ours)
+        got = draws.below_many(100, 3)
+        draws.close()
+        assert got == theirs.integers(0, 100, size=3).tolist()
+        assert ours.bit_generator.state == theirs.bit_generator.state
+
+
+def test_only_pcg64_streams_are_reproduced() -> None:
+    with pytest.raises(TypeError, match="PCG64"):
+        BoundedDraws(np.random.Generator(np.random.Philox(0)))
