@@ -402,7 +402,6 @@ SETTINGS = np.dtype(
         ("pos_high", np.int64, (2,)),
         ("vel", np.int64, (9, 2)),  # (dx, dy) per action code
         ("agent_radius", np.int64),
-        ("agent_scale", np.float64),
         ("agent_sprite0", np.int64),  # id of the heading-0 agent sprite in the core's SpriteScatter
         ("agent_near", np.float64),  # agent sprite extent + 2.5 (hole raster and centre truncation); -1: visible
         ("max_health", np.float64),
@@ -563,7 +562,6 @@ class SearingSpotlightsCore(BatchedCore):
         record["pos_high"] = SCREEN - radius, SCREEN - radius
         vx, vy = continuous_velocity(ACTION_PAIRS, np.full(9, float(opts["agent_speed"])))
         record["vel"] = np.stack([vx, vy], axis=1)
-        record["agent_scale"] = opts["agent_scale"]
         extent = agent_extent(float(opts["agent_scale"]))
         record["agent_sprite0"] = self.agent_sprites.add(agent_sprites(float(opts["agent_scale"])))
         record["agent_near"] = -1.0 if opts["agent_visible"] else extent + 2.5
