@@ -245,8 +245,9 @@ class SpriteScatter:
         self.widths = np.zeros(0, dtype=np.int64)
         self.max_side = 0
         self._dy = self._dx = np.zeros((0, 0), dtype=np.int64)  # opaque pixels' offsets from the top-left
-        self._colours = np.zeros((0, 0), dtype=PIXEL)
-        self._offsets = np.zeros((0, 0), dtype=np.int64)  # dy * width + dx for frames of `_width` pixels per row
+        self._colours = np.zeros((0, 0), dtype=PIXEL)  # the same pixels' colours, one item each
+        self._bytes = np.zeros((0, 0), dtype=np.uint8)  # and as bytes
+        self._byte_offsets = np.zeros((0, 0), dtype=np.int64)  # their bytes' offsets in frames `_width` px wide
         self._width = -1
 
     def add(self, sprites: tuple[Sprite, ...] | list[Sprite]) -> int:
@@ -264,6 +265,7 @@ class SpriteScatter:
         self._dy = np.stack([p[:, 0] for p in pixels])
         self._dx = np.stack([p[:, 1] for p in pixels])
         colours = np.stack([s.rgb[p[:, 0], p[:, 1]] for s, p in zip(self.sprites, pixels, strict=True)])
+        self._bytes = colours.reshape(len(colours), -1)
         self._colours = np.ascontiguousarray(colours).view(PIXEL)[..., 0]
         self._width = -1
         return len(self.sprites) - len(sprites)
@@ -284,14 +286,17 @@ class SpriteScatter:
         class), and ``where`` (frames' layout, at least the frames pasted into) limits the pixels to those whose
         first channel is nonzero.
         """
+        if not frames.flags.c_contiguous:  # a flat reshape would silently copy, and the pastes would be lost
+            raise ValueError("SpriteScatter.paste needs C-contiguous frames")
         num, height, width = frames.shape[:3]
-        flat = frames.view(PIXEL).reshape(-1)
-        if not clip:
+        if not clip:  # byte by byte: measured a little faster than pixel items when no index is redirected
             if width != self._width:
-                self._offsets, self._width = self._dy * width + self._dx, width
-            base = (slots * height + top) * width + left
-            flat[base[:, None] + self._offsets[ids]] = self._colours[ids]
+                offsets = (self._dy * width + self._dx) * 3
+                self._byte_offsets, self._width = (offsets[:, :, None] + np.arange(3)).reshape(len(offsets), -1), width
+            base = ((slots * height + top) * width + left) * 3
+            frames.reshape(-1)[base[:, None] + self._byte_offsets[ids]] = self._bytes[ids]
             return
+        flat = frames.view(PIXEL).reshape(-1)
         py = top[:, None] + self._dy[ids]
         px = left[:, None] + self._dx[ids]
         pixel = (slots[:, None] * height + py) * width + px

@@ -110,3 +110,11 @@ def test_sprite_paste_with_leading_axes_and_where() -> None:
         np.testing.assert_array_equal(pasted, single)
         assert (pasted[:, W // 2 :] == frame[:, W // 2 :]).all()  # nothing outside `where`
     assert (both != frames).any()
+
+
+def test_scatter_refuses_frames_it_could_not_write_in_place() -> None:
+    scatter = SpriteScatter()
+    scatter.add(random_sprites(np.random.default_rng(1)))
+    canvas = np.zeros((2, H + 4, W + 4, 3), np.uint8)
+    with pytest.raises(ValueError, match="C-contiguous"):
+        scatter.paste(canvas[:, 2:-2, 2:-2], np.array([0]), np.array([0]), np.array([1]), np.array([1]))
