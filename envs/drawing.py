@@ -35,15 +35,22 @@ class Sprite:
         self.mask = np.ascontiguousarray(mask, dtype=bool)
         self.height, self.width = mask.shape
 
-    def paste(self, frame: np.ndarray, top: int, left: int) -> None:
-        """Copy the opaque pixels into ``frame`` (H, W, 3) with the sprite's top-left at (top, left), clipped."""
-        h, w = frame.shape[:2]
+    def paste(self, frame: np.ndarray, top: int, left: int, where: np.ndarray | None = None) -> None:
+        """Copy the opaque pixels into ``frame`` (..., H, W, 3) with the sprite's top-left at (top, left), clipped.
+
+        Leading axes of ``frame`` get the same paste. ``where`` ((H, W, 3), like one frame) limits the pasted pixels
+        to those whose first channel is nonzero (e.g. a 0/255 mask of the spotlight holes).
+        """
+        h, w = frame.shape[-3], frame.shape[-2]
         r0, c0 = max(top, 0), max(left, 0)
         r1, c1 = min(top + self.height, h), min(left + self.width, w)
         if r0 >= r1 or c0 >= c1:
             return
         m = self.mask[r0 - top : r1 - top, c0 - left : c1 - left]
-        frame[r0:r1, c0:c1][m] = self.rgb[r0 - top : r1 - top, c0 - left : c1 - left][m]
+        if where is not None:
+            m = m & (where[r0:r1, c0:c1, 0] != 0)
+        rgb = self.rgb[r0 - top : r1 - top, c0 - left : c1 - left]
+        np.copyto(frame[..., r0:r1, c0:c1, :], rgb, where=m[:, :, None])
 
 
 def surface_to_sprite(surface: pygame.Surface, key: tuple[int, int, int]) -> Sprite:
@@ -123,6 +130,10 @@ class SpriteSheet:
     Frames are given as a ``(num_frames, H, W * 3)`` uint8 view, so a sprite row is one contiguous run of bytes.
     ``paste`` puts sprite ``which[i]`` into frame ``slots[i]`` with the sprite's anchor on pixel (rows[i], cols[i]).
     Many pastes go through one gather/composite/scatter over strided windows; a few, or clipped ones, are looped.
+
+    Compared with :class:`SpriteScatter` (sprites of mixed sizes scattered pixel by pixel into C-contiguous frames,
+    off-screen pixels sent to a margin or a spare frame, optionally masked), this needs sprites of one canvas size
+    and composites whole windows, which suits many same-size sprites in frames without a margin or spare frame.
     """
 
     BATCH_MIN = 6  # below this many sprites a Python loop of slice pastes is faster than the windowed gather
@@ -203,3 +214,94 @@ class SpriteSheet:
             slots, rows, cols, which = slots[outside], rows[outside], cols[outside], which[outside]
         for k, row, col, w in zip(slots.tolist(), rows.tolist(), cols.tolist(), which.tolist(), strict=True):
             self.paste_one(frames[k], row, col, w)
+
+
+PIXEL = np.dtype((np.void, 3))  # one RGB pixel as a single item: a scatter then moves one item per pixel
+
+
+class SpriteScatter:
+    """Sprites of any sizes pasted into many frames with ONE fancy-index scatter (e.g. agents of several scales).
+
+    Each registered sprite is kept as the offsets of its opaque pixels from its top-left corner and their colours,
+    padded to a common length per table (padding repeats the first pixel: writing it twice changes nothing).
+    ``paste`` turns every (frame, sprite, corner) into pixel indices and writes all colours in one assignment, so
+    its cost grows with the opaque pixels pasted, not with Python calls or window areas.
+
+    The scatter cannot clip, so every index must land somewhere harmless. Two ways, chosen per call:
+
+    * ``clip=False``: the caller guarantees that every sprite lies inside its frame, typically by keeping frames
+      with a margin at least :attr:`max_side` wide around the visible picture (no per-pixel test: fastest);
+    * ``clip=True``: the last frame of ``frames`` is a spare; pixels off their frame, or outside ``where``, are
+      written there instead.
+
+    Compared with :class:`SpriteSheet` (sprites of ONE canvas size, composited through strided windows of frames
+    of any layout, clipped pastes looped one by one), this takes mixed sizes, needs C-contiguous frames, handles
+    off-screen pixels without a Python loop and can mask the paste. Use :meth:`Sprite.paste` for a single sprite.
+    """
+
+    def __init__(self) -> None:
+        self.sprites: list[Sprite] = []
+        self.heights = np.zeros(0, dtype=np.int64)
+        self.widths = np.zeros(0, dtype=np.int64)
+        self.max_side = 0
+        self._dy = self._dx = np.zeros((0, 0), dtype=np.int64)  # opaque pixels' offsets from the top-left
+        self._colours = np.zeros((0, 0), dtype=PIXEL)  # the same pixels' colours, one item each
+        self._bytes = np.zeros((0, 0), dtype=np.uint8)  # and as bytes
+        self._byte_offsets = np.zeros((0, 0), dtype=np.int64)  # their bytes' offsets in frames `_width` px wide
+        self._width = -1
+
+    def add(self, sprites: tuple[Sprite, ...] | list[Sprite]) -> int:
+        """Register ``sprites`` (consecutive ids) and return the id of the first; an already known run is reused."""
+        for i in range(len(self.sprites) - len(sprites) + 1):
+            if all(a is b for a, b in zip(self.sprites[i : i + len(sprites)], sprites, strict=False)):
+                return i
+        self.sprites.extend(sprites)
+        self.heights = np.array([s.height for s in self.sprites], dtype=np.int64)
+        self.widths = np.array([s.width for s in self.sprites], dtype=np.int64)
+        self.max_side = int(max(self.heights.max(), self.widths.max()))
+        pixels = [np.argwhere(s.mask) for s in self.sprites]
+        count = max(len(p) for p in pixels)
+        pixels = [np.concatenate([p, np.repeat(p[:1], count - len(p), axis=0)]) for p in pixels]
+        self._dy = np.stack([p[:, 0] for p in pixels])
+        self._dx = np.stack([p[:, 1] for p in pixels])
+        colours = np.stack([s.rgb[p[:, 0], p[:, 1]] for s, p in zip(self.sprites, pixels, strict=True)])
+        self._bytes = colours.reshape(len(colours), -1)
+        self._colours = np.ascontiguousarray(colours).view(PIXEL)[..., 0]
+        self._width = -1
+        return len(self.sprites) - len(sprites)
+
+    def paste(
+        self,
+        frames: np.ndarray,
+        slots: np.ndarray,
+        ids: np.ndarray,
+        top: np.ndarray,
+        left: np.ndarray,
+        clip: bool = False,
+        where: np.ndarray | None = None,
+    ) -> None:
+        """Paste sprite ``ids[i]`` into frame ``slots[i]`` of ``frames`` with its top-left at (top[i], left[i]).
+
+        ``frames`` is a C-contiguous (N, H, W, 3) uint8 array. With ``clip`` its last frame is the spare (see the
+        class), and ``where`` (frames' layout, at least the frames pasted into) limits the pixels to those whose
+        first channel is nonzero.
+        """
+        if not frames.flags.c_contiguous:  # a flat reshape would silently copy, and the pastes would be lost
+            raise ValueError("SpriteScatter.paste needs C-contiguous frames")
+        num, height, width = frames.shape[:3]
+        if not clip:  # byte by byte: measured a little faster than pixel items when no index is redirected
+            if width != self._width:
+                offsets = (self._dy * width + self._dx) * 3
+                self._byte_offsets, self._width = (offsets[:, :, None] + np.arange(3)).reshape(len(offsets), -1), width
+            base = ((slots * height + top) * width + left) * 3
+            frames.reshape(-1)[base[:, None] + self._byte_offsets[ids]] = self._bytes[ids]
+            return
+        flat = frames.view(PIXEL).reshape(-1)
+        py = top[:, None] + self._dy[ids]
+        px = left[:, None] + self._dx[ids]
+        pixel = (slots[:, None] * height + py) * width + px
+        # unsigned views: a negative coordinate becomes huge, so one comparison per axis tests both bounds
+        valid = (px.view(np.uint64) < width) & (py.view(np.uint64) < height)
+        if where is not None:
+            valid &= np.take(where.reshape(-1), 3 * pixel, mode="clip") != 0
+        flat[np.where(valid, pixel, (num - 1) * height * width)] = self._colours[ids]

@@ -32,7 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.core import BatchedCore, Index
-from envs.drawing import SCREEN, Sprite, agent_sprites, blend, pygame, round_half_away, surface_to_sprite
+from envs.drawing import SCREEN, Sprite, SpriteScatter, agent_sprites, blend, pygame, round_half_away, surface_to_sprite
 from envs.movement import continuous_heading, continuous_velocity, grid_step
 from envs.mystery_path_generator import generate_path
 from envs.options import Option
@@ -193,45 +193,8 @@ def _ice_background(phase: int) -> np.ndarray:
 
 
 # -------------------------------------------------------------------------------------------------- canvas
-class _SpriteSheet:
-    """Sprites of one role (agent headings, the cross) as padded byte-offset tables, for one-scatter pasting."""
-
-    def __init__(self) -> None:
-        self.sprites: list[Sprite] = []
-        self.heights = np.zeros(0, dtype=np.int64)
-        self.widths = np.zeros(0, dtype=np.int64)
-        self.offsets = np.zeros((0, 0), dtype=np.int64)
-        self.colours = np.zeros((0, 0), dtype=np.uint8)
-        self._row_bytes = -1
-
-    def add(self, sprites: tuple[Sprite, ...]) -> int:
-        """Register ``sprites`` (consecutive ids) and return the id of the first; known sprites are reused."""
-        for i in range(len(self.sprites) - len(sprites) + 1):
-            if all(a is b for a, b in zip(self.sprites[i : i + len(sprites)], sprites, strict=False)):
-                return i
-        self.sprites.extend(sprites)
-        self.heights = np.array([s.height for s in self.sprites], dtype=np.int64)
-        self.widths = np.array([s.width for s in self.sprites], dtype=np.int64)
-        self._row_bytes = -1
-        return len(self.sprites) - len(sprites)
-
-    def tables(self, row_bytes: int) -> tuple[np.ndarray, np.ndarray]:
-        """Byte offsets (relative to the top-left pixel) and byte values of every opaque pixel, padded per sprite."""
-        if row_bytes != self._row_bytes:
-            pixels = [np.argwhere(s.mask) for s in self.sprites]
-            most = max(len(p) for p in pixels)
-            offsets = np.zeros((len(self.sprites), most * 3), dtype=np.int64)
-            colours = np.zeros((len(self.sprites), most * 3), dtype=np.uint8)
-            for i, (sprite, p) in enumerate(zip(self.sprites, pixels, strict=True)):
-                p = np.concatenate([p, np.repeat(p[:1], most - len(p), axis=0)])  # repeats write the same value
-                offsets[i] = ((p[:, 0] * row_bytes + p[:, 1] * 3)[:, None] + np.arange(3)).ravel()
-                colours[i] = sprite.rgb[p[:, 0], p[:, 1]].ravel()
-            self.offsets, self.colours, self._row_bytes = offsets, colours, row_bytes
-        return self.offsets, self.colours
-
-
 class _Canvas:
-    """The frames of all slots, with a margin around each so that sprites can be pasted without clipping."""
+    """The frames of all slots, with a margin around each so that sprites can be scattered without clipping."""
 
     def __init__(self, num_envs: int) -> None:
         self.num_envs = num_envs
@@ -241,44 +204,37 @@ class _Canvas:
         self.margin = margin
         side = SCREEN + 2 * margin
         self.buffer = np.zeros((self.num_envs, side, side, 3), dtype=np.uint8)
-        self.flat = self.buffer.reshape(-1)
         self.view = self.buffer[:, margin : margin + SCREEN, margin : margin + SCREEN]
         # The same pixels split into tile bands: (slot, band, row in band, column, channel).
         self.bands = self.view.reshape(self.num_envs, GRID, TILE, SCREEN, 3)
         assert np.shares_memory(self.bands, self.buffer)
-        self.row_bytes = side * 3
-        # Byte position of each slot's visible top-left pixel.
-        self.origin = np.arange(self.num_envs) * (side * side * 3) + margin * (self.row_bytes + 3)
 
-    def fit(self, sheet: _SpriteSheet) -> None:
-        """Grow the margin (keeping the frames) until every sprite of ``sheet`` fits into it."""
-        need = int(max(sheet.heights.max(initial=0), sheet.widths.max(initial=0)))
-        if need > self.margin:
+    def fit(self, sprites: SpriteScatter) -> None:
+        """Grow the margin (keeping the frames) until every sprite of ``sprites`` fits into it."""
+        if sprites.max_side > self.margin:
             frames = self.view.copy()
-            self._allocate(need)
+            self._allocate(sprites.max_side)
             self.view[:] = frames
 
     def paste(
         self,
-        sheet: _SpriteSheet,
+        sprites: SpriteScatter,
         slots: np.ndarray,
         ids: np.ndarray,
         top: np.ndarray,
         left: np.ndarray,
         may_leave_screen: bool = False,
     ) -> None:
-        """Paste sprite ``ids[i]`` of ``sheet`` into slot ``slots[i]`` with its top-left at (top[i], left[i]).
+        """Paste sprite ``ids[i]`` into slot ``slots[i]`` with its top-left at screen pixel (top[i], left[i]).
 
         Sprites at least partly on the screen need no clipping (the margin is as wide as the largest sprite).
         ``may_leave_screen`` moves sprites that are entirely off the screen into the margin.
         """
-        offsets, colours = sheet.tables(self.row_bytes)
+        m = self.margin
         if may_leave_screen:
-            m = self.margin
-            top = np.minimum(np.maximum(top, -m), SCREEN + m - sheet.heights[ids])
-            left = np.minimum(np.maximum(left, -m), SCREEN + m - sheet.widths[ids])
-        base = self.origin[slots] + top * self.row_bytes + left * 3
-        self.flat[base[:, None] + offsets[ids]] = colours[ids]
+            top = np.minimum(np.maximum(top, -m), SCREEN + m - sprites.heights[ids])
+            left = np.minimum(np.maximum(left, -m), SCREEN + m - sprites.widths[ids])
+        sprites.paste(self.buffer, slots, ids, top + m, left + m)
 
 
 # ---------------------------------------------------------------------------------------------------- core
@@ -316,8 +272,8 @@ class MysteryPathCore(BatchedCore):
         self.visual_feedback = np.zeros(n, dtype=bool)
         self.reward_table = np.zeros((n, 4), dtype=np.float64)  # reward of a step, by what the agent stepped on
         # Drawing.
-        self.agents = _SpriteSheet()
-        self.crosses = _SpriteSheet()
+        self.agents = SpriteScatter()
+        self.crosses = SpriteScatter()
         self.cross_id = self.crosses.add((fall_off_cross(),))
         self.sprite0 = np.zeros(n, dtype=np.int64)  # sprite id of heading 0 at the slot's agent scale
         self.half = np.zeros(n, dtype=np.int64)  # sprite side // 2: top-left = centre - half

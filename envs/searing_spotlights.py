@@ -40,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.core import BatchedCore, Index
-from envs.drawing import KEY_BLUE, Sprite, agent_sprites, disc_mask, pygame, surface_to_sprite
+from envs.drawing import KEY_BLUE, Sprite, SpriteScatter, agent_sprites, disc_mask, pygame, surface_to_sprite
 from envs.movement import continuous_heading, continuous_velocity
 from envs.options import Option
 
@@ -135,43 +135,18 @@ def floor_rows(kind: int, hit: bool) -> np.ndarray:
     return rows
 
 
-class Planes:
-    """A sprite as (h, 3w) colour rows and 0/255 mask rows, for masked pasting into (84, 252) frame rows."""
-
-    __slots__ = ("rgb", "mask", "height", "width", "half_h", "half_w")
-
-    def __init__(self, sprite: Sprite, centre: tuple[int, int]) -> None:
-        self.rgb = _rows(sprite.rgb)
-        self.mask = _rows(np.repeat(sprite.mask[:, :, None], 3, axis=2).astype(np.uint8) * 255)
-        self.height, self.width = sprite.height, sprite.width
-        self.half_h, self.half_w = centre  # the sprite's anchor (its centre pixel) inside the canvas
-
-    def paste(self, rows: np.ndarray, x: int, y: int, where: np.ndarray | None = None) -> None:
-        """Paste with the anchor at pixel (x, y), clipped, into (..., 84, 252) rows.
-
-        ``where`` ((84, 252) of 0/255) restricts the pasted pixels.
-        """
-        top, left = int(y) - self.half_h, int(x) - self.half_w
-        r0, c0 = max(top, 0), max(left, 0)
-        r1, c1 = min(top + self.height, SCREEN), min(left + self.width, SCREEN)
-        if r0 >= r1 or c0 >= c1:
-            return
-        target = rows[..., r0:r1, 3 * c0 : 3 * c1]
-        sr, sc = slice(r0 - top, r1 - top), slice(3 * (c0 - left), 3 * (c1 - left))
-        mask = self.mask[sr, sc]
-        if where is not None:
-            mask = mask & where[r0:r1, 3 * c0 : 3 * c1]
-        target ^= (target ^ self.rgb[sr, sc]) & mask
+@cache
+def agent_extent(scale: float) -> float:
+    """Distance from the agent sprites' centre pixel to their farthest opaque pixel (all eight headings)."""
+    extent = 0.0
+    for sprite in agent_sprites(scale):
+        ys, xs = np.nonzero(sprite.mask)
+        extent = max(extent, float(np.hypot(ys - sprite.height // 2, xs - sprite.width // 2).max()))
+    return extent
 
 
 @cache
-def agent_planes(scale: float) -> tuple[Planes, ...]:
-    """The agent's eight heading sprites (index heading // 45), anchored at the canvas centre."""
-    return tuple(Planes(s, (s.height // 2, s.width // 2)) for s in agent_sprites(scale))
-
-
-@cache
-def coin_planes(scale: float) -> Planes:
+def coin_sprite(scale: float) -> Sprite:
     """A coin: a yellow disc with an orange rim of width int(2 * scale); width 0 makes pygame fill it orange."""
     radius = int(10 * scale)
     size = 2 * radius + 2
@@ -179,11 +154,11 @@ def coin_planes(scale: float) -> Planes:
     surface.fill(KEY_BLUE)
     pygame.draw.circle(surface, COIN_FILL, (radius, radius), radius)
     pygame.draw.circle(surface, COIN_RIM, (radius, radius), radius, int(2 * scale))
-    return Planes(surface_to_sprite(surface, KEY_BLUE), (radius, radius))
+    return surface_to_sprite(surface, KEY_BLUE)  # centred on pixel (radius, radius), one above height // 2
 
 
 @cache
-def exit_planes(scale: float, is_open: bool) -> Planes:
+def exit_sprite(scale: float, is_open: bool) -> Sprite:
     """The exit door: rounded top corners, a 1-px black outline, grey while closed and green once open."""
     surface = pygame.Surface((20 * scale, 20 * scale))
     surface.fill(KEY_BLUE)
@@ -191,7 +166,7 @@ def exit_planes(scale: float, is_open: bool) -> Planes:
     corners = (int(10 * scale), int(10 * scale), 0, 0)
     pygame.draw.rect(surface, EXIT_OPEN if is_open else EXIT_CLOSED, rect, 0, 0, *corners)
     pygame.draw.rect(surface, BLACK, rect, int(2 * scale), 0, *corners)
-    return Planes(surface_to_sprite(surface, KEY_BLUE), (rect.height // 2, rect.width // 2))
+    return surface_to_sprite(surface, KEY_BLUE)
 
 
 @cache
@@ -392,44 +367,17 @@ NEVER = np.iinfo(np.int64).max
 SCREEN_CENTRE = pygame.math.Vector2(CENTRE, CENTRE)
 
 
-class AgentPixels:
-    """The agent's opaque pixels per heading, as offsets from its centre and colours (padded to equal length)."""
+def paste_centred(
+    sprite: Sprite, rows: np.ndarray, x: int, y: int, where: np.ndarray | None = None, centre: int | None = None
+) -> None:
+    """Paste ``sprite`` with its centre pixel on (x, y) into (..., 84, 252) rows, clipped (and masked by ``where``).
 
-    def __init__(self, scale: float) -> None:
-        offsets, colours = [], []
-        for planes in agent_planes(scale):
-            ys, xs = np.nonzero(planes.mask[:, ::3])
-            offsets.append((ys - planes.half_h, xs - planes.half_w))
-            colours.append(planes.rgb.reshape(planes.height, planes.width, 3)[ys, xs])
-        count = max(len(dy) for dy, _ in offsets)
-        pad = [count - len(dy) for dy, _ in offsets]  # repeat the first pixel: writing it twice changes nothing
-        self.dy = np.stack([np.pad(dy, (0, p), mode="edge") for (dy, _), p in zip(offsets, pad, strict=True)])
-        self.dx = np.stack([np.pad(dx, (0, p), mode="edge") for (_, dx), p in zip(offsets, pad, strict=True)])
-        self.colour = np.stack([np.pad(c, ((0, p), (0, 0)), mode="edge") for c, p in zip(colours, pad, strict=True)])
-        self.extent = float(np.hypot(self.dy, self.dx).max())  # farthest pixel from the centre
-
-    def paste(
-        self, frames: np.ndarray, local: np.ndarray, x: np.ndarray, y: np.ndarray, sprite: np.ndarray, where=None
-    ) -> None:
-        """Paste agents into the frames ``local`` of ``frames`` ((m + 1, 84, 252) rows), centred on (x, y).
-
-        The last frame of ``frames`` is scratch: pixels off the screen (or outside ``where``) are written there.
-        ``sprite`` is the heading index (heading // 45) of each agent; ``where`` ((m, 84, 252) of 0/255)
-        restricts the pixels (the holes, for an agent under the darkness).
-        """
-        px = x[:, None] + self.dx[sprite]
-        py = y[:, None] + self.dy[sprite]
-        pixel = (local[:, None] * SCREEN + py) * SCREEN + px
-        valid = (px.view(np.uint64) < SCREEN) & (py.view(np.uint64) < SCREEN)
-        if where is not None:
-            valid &= np.take(where.reshape(-1), 3 * pixel, mode="clip") != 0  # red byte of each pixel
-        scratch = (frames.shape[0] - 1) * SCREEN * SCREEN
-        frames.reshape(-1, 3)[np.where(valid, pixel, scratch)] = self.colour[sprite]
-
-
-@cache
-def agent_pixels(scale: float) -> AgentPixels:
-    return AgentPixels(scale)
+    The centre is (height // 2, width // 2), or (centre, centre) when given (the coin's canvas is one px larger).
+    """
+    frames = rows.reshape(*rows.shape[:-1], SCREEN, 3)
+    mask = None if where is None else where.reshape(SCREEN, SCREEN, 3)
+    top, left = (sprite.height // 2, sprite.width // 2) if centre is None else (centre, centre)
+    sprite.paste(frames, int(y) - top, int(x) - left, mask)
 
 
 ALPHA_STEPS = 258  # the darkness alpha is constant after at most 256 increments
@@ -454,7 +402,7 @@ SETTINGS = np.dtype(
         ("pos_high", np.int64, (2,)),
         ("vel", np.int64, (9, 2)),  # (dx, dy) per action code
         ("agent_radius", np.int64),
-        ("agent_scale", np.float64),
+        ("agent_sprite0", np.int64),  # id of the heading-0 agent sprite in the core's SpriteScatter
         ("agent_near", np.float64),  # agent sprite extent + 2.5 (hole raster and centre truncation); -1: visible
         ("max_health", np.float64),
         ("spot_damage", np.float64),
@@ -551,6 +499,7 @@ class SearingSpotlightsCore(BatchedCore):
         for name in SETTINGS.names:  # attribute views of the settings columns
             setattr(self, name, self.settings[name])
         self.orders: list[dict[bool, tuple[tuple[str, ...], tuple[str, ...]]]] = [{} for _ in range(n)]
+        self.agent_sprites = SpriteScatter()  # every agent scale met so far (settings hold the first id)
         self._settings_cache: dict[tuple, tuple[np.void, dict]] = {}
         # episode state
         i64 = np.int64
@@ -613,8 +562,8 @@ class SearingSpotlightsCore(BatchedCore):
         record["pos_high"] = SCREEN - radius, SCREEN - radius
         vx, vy = continuous_velocity(ACTION_PAIRS, np.full(9, float(opts["agent_speed"])))
         record["vel"] = np.stack([vx, vy], axis=1)
-        record["agent_scale"] = opts["agent_scale"]
-        extent = agent_pixels(float(opts["agent_scale"])).extent
+        extent = agent_extent(float(opts["agent_scale"]))
+        record["agent_sprite0"] = self.agent_sprites.add(agent_sprites(float(opts["agent_scale"])))
         record["agent_near"] = -1.0 if opts["agent_visible"] else extent + 2.5
         record["max_health"] = opts["agent_health"]
         record["spot_damage"] = opts["spot_damage"]
@@ -1064,20 +1013,17 @@ class SearingSpotlightsCore(BatchedCore):
 
     def _paste_agents(self, frames: np.ndarray, local: np.ndarray, slots: np.ndarray, where=None) -> None:
         """Paste the agents of ``slots`` into ``frames[local]`` (masked by ``where``, e.g. the holes)."""
-        sprite = np.where(self.t[slots] > 0, self.heading[slots], 0)  # the reset frame shows it facing up
+        heading = np.where(self.t[slots] > 0, self.heading[slots], 0)  # the reset frame shows it facing up
         if len(slots) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
-            for i, k, heading in zip(local.tolist(), slots.tolist(), sprite.tolist(), strict=True):
-                planes = agent_planes(float(self.agent_scale[k]))[heading]
-                planes.paste(frames[i], self.x[k], self.y[k], None if where is None else where[i])
+            sprites = self.agent_sprites.sprites
+            for i, k, h in zip(local.tolist(), slots.tolist(), heading.tolist(), strict=True):
+                sprite = sprites[int(self.agent_sprite0[k]) + h]
+                paste_centred(sprite, frames[i], self.x[k], self.y[k], None if where is None else where[i])
             return
-        scales = self.agent_scale[slots]
-        if (scales == scales[0]).all():
-            agent_pixels(float(scales[0])).paste(frames, local, self.x[slots], self.y[slots], sprite, where)
-            return
-        for scale in set(scales.tolist()):
-            same = scales == scale
-            pixels = agent_pixels(scale)
-            pixels.paste(frames, local[same], self.x[slots[same]], self.y[slots[same]], sprite[same], where)
+        ids = self.agent_sprite0[slots] + heading
+        half = self.agent_sprites.heights[ids] // 2  # square sprites, centred on the agent
+        frames = frames.reshape(-1, SCREEN, SCREEN, 3)
+        self.agent_sprites.paste(frames, local, ids, self.y[slots] - half, self.x[slots] - half, True, where)
 
     def _build_lit(self, k: int) -> None:
         """Slot k's lit pictures (blue and red floor) with its coins and exit, in the reference's order."""
@@ -1086,24 +1032,24 @@ class SearingSpotlightsCore(BatchedCore):
         rows[0] = floor_rows(kind, False)
         rows[1] = floor_rows(kind, bool(self.red_feedback[k]))
         if self.coins_left[k]:
-            coin = coin_planes(float(self.coin_scale[k]))
+            coin, radius = coin_sprite(float(self.coin_scale[k])), int(10 * self.coin_scale[k])
             for j in np.flatnonzero(self.coin_alive[k]):
-                coin.paste(rows, self.coin_x[k, j], self.coin_y[k, j])
+                paste_centred(coin, rows, self.coin_x[k, j], self.coin_y[k, j], centre=radius)
         if self.use_exit[k]:
-            planes = exit_planes(float(self.exit_scale[k]), bool(self.exit_open[k]))
-            planes.paste(rows, self.exit_x[k], self.exit_y[k])
+            door = exit_sprite(float(self.exit_scale[k]), bool(self.exit_open[k]))
+            paste_centred(door, rows, self.exit_x[k], self.exit_y[k])
 
     def _paste_entity(self, frames: np.ndarray, i: int, k: int, name: str) -> None:
         """Paste one entity of slot k into frame ``i`` of ``frames`` (a buffer ending with a scratch frame)."""
         if name == "agent":
             self._paste_agents(frames, np.array([i]), np.array([k]))
         elif name == "coins":
-            coin = coin_planes(float(self.coin_scale[k]))
+            coin, radius = coin_sprite(float(self.coin_scale[k])), int(10 * self.coin_scale[k])
             for j in np.flatnonzero(self.coin_alive[k]):
-                coin.paste(frames[i], self.coin_x[k, j], self.coin_y[k, j])
+                paste_centred(coin, frames[i], self.coin_x[k, j], self.coin_y[k, j], centre=radius)
         else:
-            planes = exit_planes(float(self.exit_scale[k]), bool(self.exit_open[k]))
-            planes.paste(frames[i], self.exit_x[k], self.exit_y[k])
+            door = exit_sprite(float(self.exit_scale[k]), bool(self.exit_open[k]))
+            paste_centred(door, frames[i], self.exit_x[k], self.exit_y[k])
 
     def _coin_above(self, k: int) -> bool:
         """Whether slot k's coin is drawn above the darkness now (endless: also while it is new)."""
