@@ -14,7 +14,7 @@ sys.path.insert(0, str(ROOT))
 
 from envs import ENV_IDS  # noqa: E402
 from scripts.io_utils import write_json_atomic  # noqa: E402
-from tests.parity import REFERENCE_IDS, replay  # noqa: E402
+from tests.parity import REFERENCE_IDS, replay, replay_batched  # noqa: E402
 
 
 def main() -> None:
@@ -26,16 +26,20 @@ def main() -> None:
         if env_id not in ENV_IDS:
             print(f"{env_id:32s} not implemented")
             continue
-        result = replay(env_id)
-        report[env_id] = {
-            "episodes": result.episodes,
-            "steps": result.steps,
-            "identical": result.identical,
-            "percent": round(result.percent, 3),
-        }
-        print(f"{env_id:32s} {result.episodes:4d} episodes {result.steps:7d} steps {result.percent:8.3f}% identical")
-        for line in result.mismatches[:3]:
-            print("    ", line[:300])
+        report[env_id] = {}
+        for face, result in (("single", replay(env_id)), ("batched", replay_batched(env_id))):
+            report[env_id][face] = {
+                "episodes": result.episodes,
+                "steps": result.steps,
+                "identical": result.identical,
+                "percent": round(result.percent, 3),
+            }
+            print(
+                f"{env_id:30s} {face:8s} {result.episodes:3d} episodes {result.steps:6d} steps "
+                f"{result.percent:8.3f}% identical"
+            )
+            for line in result.mismatches[:3]:
+                print("    ", line[:300])
     write_json_atomic(args.out, report)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from envs import ENV_IDS
-from tests.parity import REFERENCE_IDS, TRACE_ROOT, replay
+from tests.parity import REFERENCE_IDS, TRACE_ROOT, replay, replay_batched
 
 IMPLEMENTED = [env_id for env_id in REFERENCE_IDS if env_id in ENV_IDS]
 
@@ -21,5 +21,15 @@ def test_reference_trace_parity(env_id: str) -> None:
     assert result.steps > 0
     assert result.identical == result.steps, (
         f"{env_id}: {result.identical}/{result.steps} steps identical ({result.percent:.2f}%); first mismatches:\n"
+        + "\n".join(result.mismatches)
+    )
+
+
+@pytest.mark.parametrize("env_id", IMPLEMENTED)
+def test_reference_trace_parity_in_one_batch(env_id: str) -> None:
+    result = replay_batched(env_id)
+    assert result.steps > 0
+    assert result.identical == result.steps, (
+        f"{env_id} batched: {result.identical}/{result.steps} steps identical; first mismatches:\n"
         + "\n".join(result.mismatches)
     )

@@ -24,7 +24,6 @@ from envs.searing_spotlights import (
     paint_hud_row,
     sample_position,
 )
-from scripts.trace_format import load_traces, obs_digest
 from tests.parity import jsonable, values_equal
 
 IDS = ["SearingSpotlights-v0", "Endless-SearingSpotlights-v0"]
@@ -581,31 +580,6 @@ def test_vector_env_matches_single_envs(env_id: str) -> None:
                 restart[k] = single_terminated
             np.testing.assert_array_equal(obs[k], single_obs)
     assert resets >= 3
-
-
-@pytest.mark.parametrize("env_id", IDS)
-def test_reference_traces_replayed_in_one_batch(env_id: str) -> None:
-    """The batched (vectorised) step against the reference: every seeded trace episode in its own slot."""
-    episodes = [ep for ep in load_traces(env_id)["episodes"] if ep["seed"] is not None]
-    core = envs.make_core(env_id, num_envs=len(episodes))
-    for k, ep in enumerate(episodes):
-        core.reset_slot(k, seed=ep["seed"], options=ep["options"])
-        assert obs_digest(core.agent_frame(k)) == ep["reset_obs"], ep["name"]
-    checked = 0
-    for t in range(max(len(ep["actions"]) for ep in episodes)):
-        live = np.array([k for k, ep in enumerate(episodes) if t < len(ep["actions"])])
-        actions = np.array([episodes[k]["actions"][t] for k in live])
-        rewards, terminated, finals = core.step(actions, idx=live if live.size < len(episodes) else None)
-        frames = core.observations(live)
-        for i, k in enumerate(live.tolist()):
-            ep = episodes[k]
-            info = core.step_info(k)
-            info.update(finals.get(k, {}))
-            assert obs_digest(frames[i]) == ep["obs"][t], (ep["name"], t)
-            assert values_equal(float(rewards[i]), ep["rewards"][t]) and bool(terminated[i]) == ep["terminated"][t]
-            assert values_equal(jsonable(info), ep["infos"][t]), (ep["name"], t)
-            checked += 1
-    assert checked == sum(len(ep["actions"]) for ep in episodes)
 
 
 def test_endless_first_coin_can_spawn_within_reach_of_the_agent() -> None:
