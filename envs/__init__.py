@@ -17,6 +17,17 @@ __all__ = ["BatchedCore", "MemoryGymEnv", "MemoryGymVectorEnv", "ENV_IDS", "make
 # id -> (core class path, variant arguments of that family)
 ENV_IDS: dict[str, tuple[str, dict[str, Any]]] = {
     "ProofOfMemory-v0": ("envs.proof_of_memory:ProofOfMemoryCore", {}),
+    "MortarMayhem-v0": ("envs.mortar_mayhem:MortarMayhemCore", {}),
+    "MortarMayhem-Grid-v0": ("envs.mortar_mayhem:MortarMayhemCore", {"grid": True}),
+    "MortarMayhemB-v0": (
+        "envs.mortar_mayhem:MortarMayhemCore",
+        {"clue_phase": False, "vector_observation": True, "spawn_jitter": True},
+    ),
+    "MortarMayhemB-Grid-v0": (
+        "envs.mortar_mayhem:MortarMayhemCore",
+        {"grid": True, "clue_phase": False, "vector_observation": True},
+    ),
+    "Endless-MortarMayhem-v0": ("envs.mortar_mayhem:MortarMayhemCore", {"endless": True, "spawn_jitter": True}),
 }
 
 

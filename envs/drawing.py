@@ -21,7 +21,8 @@ BLACK = (0, 0, 0)
 KEY_BLUE = (0, 0, 255)
 
 AGENT_BODY = (250, 204, 153)
-AGENT_HAND = (50, 50, 50)  # the hand outline width truncates to 0, so the outline colour fills the whole hand
+AGENT_HAND_FILL = (250, 250, 250)
+AGENT_HAND = (50, 50, 50)  # the outline; at scale < 1/3 its width truncates to 0 and it fills the whole hand
 
 
 class Sprite:
@@ -88,6 +89,7 @@ def agent_sprites(scale: float = 0.25) -> tuple[Sprite, ...]:
     hands_dx = int(18 * scale)
     hand_dy = int(12 * scale)
     hand_radius = int(10 * scale)
+    hand_outline = int(3 * scale)  # 0 means "filled" to pygame
     extension = 14
     dim = radius * 2 + hand_radius + extension
     centre = pygame.math.Vector2(dim // 2, dim // 2)
@@ -102,7 +104,10 @@ def agent_sprites(scale: float = 0.25) -> tuple[Sprite, ...]:
         pygame.draw.circle(surface, AGENT_BODY, centre, radius)
         for hand in hands:
             pos = (hand - centre).rotate(360 - heading) + centre
-            pygame.draw.circle(surface, AGENT_HAND, pos, hand_radius)
+            pygame.draw.circle(surface, AGENT_HAND_FILL, pos, hand_radius)
+        for hand in hands:
+            pos = (hand - centre).rotate(360 - heading) + centre
+            pygame.draw.circle(surface, AGENT_HAND, pos, hand_radius, hand_outline)
         sprites.append(surface_to_sprite(surface, KEY_BLUE))
     return tuple(sprites)
 
@@ -111,3 +116,79 @@ def paste_agent(frame: np.ndarray, x: int, y: int, heading: int, scale: float = 
     """Draw the agent centred on pixel (x, y) with the sprite of ``heading`` (a multiple of 45 degrees)."""
     sprite = agent_sprites(scale)[(int(heading) % 360) // 45]
     sprite.paste(frame, int(y) - sprite.height // 2, int(x) - sprite.width // 2)
+
+
+class SpriteSheet:
+    """Same-anchored sprites (e.g. the eight agent headings) cropped to their common bounding box, pasted in batches.
+
+    Frames are given as a ``(num_frames, H, W * 3)`` uint8 view, so a sprite row is one contiguous run of bytes.
+    ``paste`` puts sprite ``which[i]`` into frame ``slots[i]`` with the sprite's anchor on pixel (rows[i], cols[i]).
+    Many pastes go through one gather/composite/scatter over strided windows; a few, or clipped ones, are looped.
+    """
+
+    BATCH_MIN = 6  # below this many sprites a Python loop of slice pastes is faster than the windowed gather
+
+    def __init__(self, sprites: tuple[Sprite, ...] | list[Sprite], anchor_row: int, anchor_col: int) -> None:
+        union = np.zeros_like(sprites[0].mask)
+        for sprite in sprites:
+            if sprite.mask.shape != union.shape:
+                raise ValueError("all sprites of a sheet must have the same canvas size")
+            union |= sprite.mask
+        rows, cols = np.flatnonzero(union.any(axis=1)), np.flatnonzero(union.any(axis=0))
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        self.height, self.width = int(r1 - r0), int(c1 - c0)
+        self.top, self.left = int(r0 - anchor_row), int(c0 - anchor_col)  # window corner relative to the anchor
+        self.rgb = np.stack([s.rgb[r0:r1, c0:c1].reshape(self.height, -1) for s in sprites])
+        self.mask = np.stack([np.repeat(s.mask[r0:r1, c0:c1], 3, axis=1) for s in sprites])
+        self._rgb_list, self._mask_list = list(self.rgb), list(self.mask)
+        self._windows: dict[tuple, np.ndarray] = {}
+
+    def _window_view(self, frames: np.ndarray) -> np.ndarray:
+        """Every (height x width) window of every frame, as a writeable strided view (no copy)."""
+        key = (frames.__array_interface__["data"][0], frames.shape, frames.strides)
+        view = self._windows.get(key)
+        if view is None:
+            n, h, w3 = frames.shape
+            shape = (n, h - self.height + 1, (w3 - 3 * self.width) // 3 + 1, self.height, 3 * self.width)
+            strides = (
+                frames.strides[0],
+                frames.strides[1],
+                3 * frames.strides[2],
+                frames.strides[1],
+                frames.strides[2],
+            )
+            view = np.lib.stride_tricks.as_strided(frames, shape, strides, writeable=True)
+            if len(self._windows) >= 4:  # the views keep their frame buffers alive: keep only a few
+                self._windows.clear()
+            self._windows[key] = view
+        return view
+
+    def paste(
+        self, frames: np.ndarray, slots: np.ndarray, rows: np.ndarray, cols: np.ndarray, which: np.ndarray
+    ) -> None:
+        top, left = rows + self.top, cols + self.left
+        height, width = frames.shape[1], frames.shape[2] // 3
+        inside = (top >= 0) & (left >= 0) & (top <= height - self.height) & (left <= width - self.width)
+        if inside.sum() >= self.BATCH_MIN:
+            windows = self._window_view(frames)
+            k, t, c, w = slots[inside], top[inside], left[inside], which[inside]
+            patch = windows[k, t, c]
+            np.copyto(patch, self.rgb[w], where=self.mask[w])
+            windows[k, t, c] = patch
+            if inside.all():
+                return
+            outside = ~inside
+            slots, top, left, which = slots[outside], top[outside], left[outside], which[outside]
+        h3 = 3 * self.width
+        for k, t, c, w in zip(slots.tolist(), top.tolist(), left.tolist(), which.tolist(), strict=True):
+            if 0 <= t <= height - self.height and 0 <= c <= width - self.width:
+                np.copyto(
+                    frames[k, t : t + self.height, 3 * c : 3 * c + h3], self._rgb_list[w], where=self._mask_list[w]
+                )
+                continue
+            r0, r1 = max(t, 0), min(t + self.height, height)
+            c0, c1 = max(c, 0), min(c + self.width, width)
+            if r0 >= r1 or c0 >= c1:
+                continue
+            sub = (slice(r0 - t, r1 - t), slice(3 * (c0 - c), 3 * (c1 - c)))
+            np.copyto(frames[k, r0:r1, 3 * c0 : 3 * c1], self._rgb_list[w][sub], where=self._mask_list[w][sub])

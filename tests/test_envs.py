@@ -1,0 +1,268 @@
+"""Generic checks that every registered id must pass (parametrized over ``envs.ENV_IDS``).
+
+* the single face passes gymnasium's ``check_env``;
+* slot k of ``make_vec(id, num_envs=N)`` reset with seed s + k plays exactly the episodes of a single env reset with
+  seed s + k (observations, rewards, flags, infos, final infos), through the NEXT_STEP autoreset continuation and in
+  SAME_STEP mode, over whole episodes with random actions;
+* reset options apply to one episode only, on both faces;
+* ``rgb_array`` renders the observation image, ``debug_rgb_array`` a uint8 picture 4x its size (336x336x3 for the
+  84x84 Memory Gym views), ``human`` opens a window (dummy video driver);
+* unknown option keys raise ``ValueError`` naming the key and the valid keys.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode
+
+import envs
+from envs import ENV_IDS, make_core
+from envs.options import Option
+
+ALL_IDS = list(ENV_IDS)
+NUM_ENVS = 3
+MAX_VECTOR_STEPS = 1500  # enough for two random episodes of every id (the longest, MysteryPath, stops at 512 steps)
+
+
+# ----------------------------------------------------------------------------------------------------- helpers
+def random_action(space: gym.Space, rng: np.random.Generator) -> Any:
+    if isinstance(space, gym.spaces.Discrete):
+        return int(space.start + rng.integers(space.n))
+    if isinstance(space, gym.spaces.MultiDiscrete):
+        return (space.start + rng.integers(space.nvec)).astype(space.dtype)
+    raise TypeError(f"no random action for {space}")
+
+
+def plain(value: Any) -> Any:
+    """Arrays and numpy scalars as python lists/numbers, recursively, so values compare by content."""
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    return value
+
+
+def same(a: Any, b: Any) -> bool:
+    a, b = plain(a), plain(b)
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, int | float) and isinstance(b, int | float):
+        return (math.isnan(a) and math.isnan(b)) or math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-12)
+    return a == b
+
+
+def slot_info(infos: dict[str, Any], k: int) -> dict[str, Any]:
+    """Slot k's info out of a vector info dict (keys with their ``_key`` masks, nested dicts recursively)."""
+    out = {}
+    for key, value in infos.items():
+        if key.startswith("_") or not infos[f"_{key}"][k]:
+            continue
+        out[key] = slot_info(value, k) if isinstance(value, dict) else value[k]
+    return out
+
+
+def slot_obs(obs: Any, k: int) -> Any:
+    return {key: v[k] for key, v in obs.items()} if isinstance(obs, dict) else obs[k]
+
+
+def image_of(obs: Any) -> np.ndarray:
+    return obs["visual_observation"] if isinstance(obs, dict) else obs
+
+
+def changed_value(spec: Option) -> Any:
+    """A valid value that differs from the option's default."""
+
+    def shift(v: float, kind: str) -> float:
+        step = 1 if kind == "int" else 0.5 * (abs(v) or 1.0)
+        up = v + step
+        if kind == "float" and spec.high is not None and up > spec.high:
+            up = (v + spec.high) / 2 if v < spec.high else v - step
+        if spec.high is not None and up > spec.high or up == v:
+            up = v - step
+        if spec.low is not None and up < spec.low:
+            up = (v + spec.low) / 2 if kind == "float" else v
+        return up
+
+    if spec.kind == "bool":
+        return not spec.default
+    if spec.kind in ("int", "float"):
+        return shift(spec.default, spec.kind)
+    kind = "int" if spec.kind == "int_list" else "float"
+    return [shift(v, kind) for v in spec.default]
+
+
+def first_steps(env: gym.Env, seed: int, options: dict | None, steps: int = 60) -> list[Any]:
+    """Reset observation and the first steps under a fixed action stream, as comparable plain values."""
+    rng = np.random.default_rng(0)
+    obs, info = env.reset(seed=seed, options=options)
+    out = [(image_of(obs).tobytes(), plain(info))]
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(random_action(env.action_space, rng))
+        out.append((image_of(obs).tobytes(), reward, terminated, truncated, plain(info)))
+        if terminated or truncated:
+            break
+    return out
+
+
+# ------------------------------------------------------------------------------------------------------ tests
+@pytest.mark.parametrize("env_id", ALL_IDS)
+@pytest.mark.parametrize("render_mode", [None, "rgb_array"])
+def test_check_env(env_id: str, render_mode: str | None) -> None:
+    env = gym.make(env_id, render_mode=render_mode, disable_env_checker=True)
+    check_env(env.unwrapped, skip_render_check=render_mode is None)
+    env.close()
+
+
+def play_vector(env_id: str, mode: AutoresetMode, seed: int) -> list[dict[str, Any]]:
+    """Run the vector face with per-slot random actions; return everything each step returned."""
+    venv = gym.make_vec(env_id, num_envs=NUM_ENVS, autoreset_mode=mode)
+    assert venv.metadata["autoreset_mode"] == mode
+    rngs = [np.random.default_rng(1000 + k) for k in range(NUM_ENVS)]
+    obs, infos = venv.reset(seed=seed)
+    record = [{"obs": obs, "infos": infos}]
+    episodes = np.zeros(NUM_ENVS, dtype=int)
+    for _ in range(MAX_VECTOR_STEPS):
+        actions = np.stack([np.asarray(random_action(venv.single_action_space, r)) for r in rngs])
+        obs, rewards, terminated, truncated, infos = venv.step(actions)
+        record.append(dict(actions=actions, obs=obs, rewards=rewards, terminated=terminated, infos=infos))
+        episodes += terminated | truncated
+        if (episodes >= 2).all():
+            break
+    venv.close()
+    assert (episodes >= 1).all(), f"some slot never finished an episode in {MAX_VECTOR_STEPS} steps: {episodes}"
+    return record
+
+
+def assert_step(got: tuple, want: tuple, where: str) -> None:
+    names = ("obs", "reward", "terminated", "info")
+    for name, g, w in zip(names, got, want, strict=True):
+        if name == "obs":
+            ok = all(np.array_equal(g[key], w[key]) for key in w) if isinstance(w, dict) else np.array_equal(g, w)
+        else:
+            ok = same(g, w)
+        assert ok, (
+            f"{where}: {name} differs (vector {g if name != 'obs' else '...'}, single {w if name != 'obs' else '...'})"
+        )
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_vector_slots_replay_single_envs(env_id: str, mode: AutoresetMode) -> None:
+    seed = 11
+    record = play_vector(env_id, mode, seed)
+    for k in range(NUM_ENVS):
+        env = gym.make(env_id, disable_env_checker=True)
+        obs, info = env.reset(seed=seed + k)
+        first = record[0]
+        assert_step((slot_obs(first["obs"], k), 0, False, slot_info(first["infos"], k)), (obs, 0, False, info), "reset")
+        needs_reset = False
+        for t, rec in enumerate(record[1:], start=1):
+            got_info = slot_info(rec["infos"], k)
+            got = (slot_obs(rec["obs"], k), rec["rewards"][k], bool(rec["terminated"][k]), None)
+            where = f"{env_id} slot {k} step {t} ({mode.value})"
+            if needs_reset:  # NEXT_STEP: this step restarts the slot (action ignored, reward 0)
+                obs, info = env.reset()
+                assert_step(got[:3] + (got_info,), (obs, 0.0, False, info), where + " autoreset")
+                needs_reset = False
+                continue
+            obs, reward, terminated, truncated, info = env.step(rec["actions"][k])
+            assert not truncated
+            if terminated and mode == AutoresetMode.SAME_STEP:
+                final = (got_info["final_obs"], rec["rewards"][k], bool(rec["terminated"][k]), got_info["final_info"])
+                assert_step(final, (obs, reward, terminated, info), where + " final")
+                obs, info = env.reset()
+                rest = {key: v for key, v in got_info.items() if key not in ("final_obs", "final_info")}
+                assert_step((got[0], 0.0, False, rest), (obs, 0.0, False, info), where + " same-step reset")
+                continue
+            assert_step(got[:3] + (got_info,), (obs, reward, terminated, info), where)
+            needs_reset = terminated and mode == AutoresetMode.NEXT_STEP
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_options_apply_to_one_episode(env_id: str) -> None:
+    # Between the episode with the option and the checked one runs a default "flush" episode: some reference quirks
+    # carry drawing state over a reset (Endless Mortar Mayhem's clue stream shows the sprite drawn last), so the
+    # checked episode must follow the same previous episode in both runs.
+    specs = make_core(env_id).option_specs
+    baseline_env = gym.make(env_id, disable_env_checker=True)
+    first_steps(baseline_env, 7, None)
+    baseline = first_steps(baseline_env, 5, None)
+    effective = []
+    for key, spec in specs.items():
+        options = {key: changed_value(spec)}
+        env = gym.make(env_id, disable_env_checker=True)
+        with_option = first_steps(env, 5, options)
+        first_steps(env, 7, None)
+        after = first_steps(env, 5, None)  # back to the defaults
+        assert after == baseline, f"{env_id}: option {options} leaked into a later episode"
+        if with_option != first_steps(gym.make(env_id, disable_env_checker=True), 5, None):
+            effective.append(key)
+        env.close()
+    assert effective, f"{env_id}: no option changed the first steps, so this test could not fail"
+    # the vector face: options of a reset apply to that reset only
+    key = effective[0]
+    venv = gym.make_vec(env_id, num_envs=2)
+    venv.reset(seed=[5, 6], options={key: changed_value(specs[key])})
+    obs, _ = venv.reset(seed=[5, 6])
+    single_obs, _ = gym.make(env_id, disable_env_checker=True).reset(seed=5)
+    assert np.array_equal(image_of(obs)[0], image_of(single_obs))
+    venv.close()
+    baseline_env.close()
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_render_modes(env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(0)
+    env = gym.make(env_id, render_mode="rgb_array", disable_env_checker=True)
+    debug = gym.make(env_id, render_mode="debug_rgb_array", disable_env_checker=True)
+    obs, _ = env.reset(seed=3)
+    debug.reset(seed=3)
+    for _ in range(30):
+        frame = env.render()
+        assert frame.dtype == np.uint8 and frame.shape == image_of(obs).shape
+        assert np.array_equal(frame, image_of(obs))
+        picture = debug.render()
+        height, width = image_of(obs).shape[:2]  # 84x84 Memory Gym views give 336x336 pictures
+        assert picture.dtype == np.uint8 and picture.shape == (4 * height, 4 * width, 3)
+        action = random_action(env.action_space, rng)
+        obs, _, terminated, _, _ = env.step(action)
+        debug.step(action)
+        if terminated:
+            obs, _ = env.reset()
+            debug.reset()
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    human = gym.make(env_id, render_mode="human", disable_env_checker=True)
+    human.reset(seed=3)  # shows the first picture (the window's clock holds the env's frame rate from the next one)
+    assert human.render() is None
+    human.close()
+    env.close()
+    debug.close()
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_unknown_option_raises(env_id: str) -> None:
+    env = gym.make(env_id, disable_env_checker=True)
+    with pytest.raises(ValueError, match="no_such_option") as err:
+        env.reset(seed=0, options={"no_such_option": 1})
+    for key in make_core(env_id).option_specs:
+        assert key in str(err.value), "the message lists the valid keys"
+    venv = gym.make_vec(env_id, num_envs=2)
+    with pytest.raises(ValueError, match="no_such_option"):
+        venv.reset(seed=0, options={"no_such_option": 1})
+    with pytest.raises(ValueError, match="no_such_option"):
+        gym.make(env_id, options={"no_such_option": 1})
+
+
+def test_registry_lists_every_id() -> None:
+    for env_id in ALL_IDS:
+        assert env_id in gym.registry
+    assert envs.make_core(ALL_IDS[0], num_envs=2).num_envs == 2
