@@ -28,8 +28,6 @@ from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
 import yaml
 
 import envs
-from envs.core import load_core
-from envs.options import resolve_options
 
 MEMORY_KINDS = ("none", "gru", "lstm")  # "trxl" joins here once agents.models implements it
 ENCODER_KINDS = ("nature_cnn",)
@@ -121,7 +119,7 @@ class RunConfig:
     workers: int = param(32, "environments stepped in parallel (slots of one batched core)", low=1)
     worker_steps: int = param(512, "steps per worker per rollout", low=1)
     device: str = param("cpu", "torch device: 'cpu' or 'cuda' (or 'cuda:N')")
-    precision: str = param("fp32", "'fp32' or 'bf16' (autocast of the encoders and memory input)")
+    precision: str = param("fp32", "'fp32', or 'bf16': autocast (convolutions, matmuls, GRU in bfloat16)")
     torch_threads: int = param(0, "torch intra-op threads (0: one per CPU core)", low=0)
     seed: int = param(0, "seed of the model init, action sampling, minibatch shuffling and episode seeds", low=0)
     checkpoint_interval: int = param(100, "updates between checkpoints (0: only at the end)", low=0)
@@ -348,9 +346,8 @@ def _check_env(block: EnvConfig, prefix: str) -> None:
         close = difflib.get_close_matches(block.id, ids, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise ConfigError(f"{prefix}.id={block.id!r} is unknown{hint}; valid ids: {', '.join(ids)}")
-    core_class = load_core(envs.ENV_IDS[block.id][0])
-    try:
-        resolve_options(core_class.option_specs, block.options, name=block.id)
+    try:  # a one-slot core validates the options exactly as training will (families differ per variant)
+        envs.make_core(block.id, 1, block.options)
     except ValueError as err:
         raise ConfigError(f"{prefix}.options: {err}") from err
     seeds = block.train_seeds

@@ -7,8 +7,9 @@
                                 -> Linear(128) + ReLU --------+                               -> value FC  -> value
 
 The memory module is ``none`` (identity), ``gru`` or ``lstm``. Non-recurrent layers always see a flat batch of
-real steps; only the memory module sees the (sequences, length) layout, which it builds from the flat batch with
-a padding mask (:meth:`RecurrentMemory.sequences`). A memory module keeps its state as one tensor per environment
+real steps; only the memory module sees the (sequences, length) layout, which it takes from the padding mask of
+the minibatch (:meth:`RecurrentMemory.sequences`, which runs the recurrence packed, so padding costs nothing).
+A memory module keeps its state as one tensor per environment
 (``state_shape``), so the buffer stores it like any other field. A transformer memory (``trxl``) or a HELM branch
 (a frozen feature extractor whose outputs the buffer caches) plug into the same seams: a new entry in
 :data:`MEMORY_MODULES`, or a new encoder concatenated in :meth:`ActorCritic.encode`.
@@ -28,6 +29,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
+from torch.nn.utils.rnn import PackedSequence
 
 from agents.config import MEMORY_KINDS, ModelConfig
 
@@ -82,6 +84,12 @@ def model_inputs(observation_space: gym.Space, action_space: gym.Space, config: 
     return fields
 
 
+def compute_dtype(weight: Tensor) -> torch.dtype:
+    """The dtype a layer computes in: the autocast type when autocast is on, else its weights' own type."""
+    device = weight.device.type
+    return torch.get_autocast_dtype(device) if torch.is_autocast_enabled(device) else weight.dtype
+
+
 def orthogonal(layer: nn.Module, gain: float) -> nn.Module:
     """Orthogonal weights with ``gain`` and zero biases, in place; returns the layer."""
     for name, param in layer.named_parameters():
@@ -117,8 +125,9 @@ class NatureCNN(nn.Module):
     def forward(self, images: Tensor) -> Tensor:
         if images.dtype != torch.uint8:
             raise TypeError(f"the CNN takes uint8 images (0..255), got {images.dtype}")
-        # The only place where pixels become [0, 1] floats. HWC -> CHW is a view (channels-last strides).
-        pixels = images.permute(0, 3, 1, 2).float().mul_(1.0 / 255.0)
+        # The only place where pixels become [0, 1] floats. HWC -> CHW is a view (channels-last strides, which
+        # oneDNN convolutions prefer); under autocast or with bfloat16 weights the pixels go straight to bfloat16.
+        pixels = images.permute(0, 3, 1, 2).to(compute_dtype(self.convs[0].weight)).mul_(1.0 / 255.0)
         return self.convs(pixels)
 
 
@@ -156,7 +165,7 @@ class RecurrentMemory(nn.Module):
 
     def step(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
         """One step of ``B`` environments: features (B, F), state (B, *state_shape)."""
-        output, final = self.rnn(features.unsqueeze(1), self._to_rnn(state))
+        output, final = self.rnn(features.unsqueeze(1), self._to_rnn(state.to(features.dtype)))
         return output.squeeze(1), self._from_rnn(final)
 
     def sequences(self, features: Tensor, start_state: Tensor, mask: Tensor) -> Tensor:
@@ -164,13 +173,20 @@ class RecurrentMemory(nn.Module):
         which of the P positions of each of the S sequences are real (a prefix), ``start_state`` (S, ...) is the
         state the policy had at each sequence start. Returns the outputs of the N real steps, in the same order.
 
-        Padding is zeros after the last real step of a sequence, so (the layer being causal) it cannot change any
-        real output; it is dropped again before anything else sees it.
+        The recurrence runs on the packed layout (at time t, only the sequences still running), so padding costs
+        nothing and cannot change any output: what the zero-padded (S, P) layout computes, minus the padding.
         """
-        padded = features.new_zeros((*mask.shape, features.shape[-1]))
-        padded[mask] = features
-        output, _ = self.rnn(padded, self._to_rnn(start_state))
-        return output[mask]
+        order = torch.argsort(mask.sum(dim=1), descending=True, stable=True)  # packing wants the longest first
+        row = torch.zeros(mask.shape, dtype=torch.int64, device=mask.device)
+        row[mask] = torch.arange(features.shape[0], device=mask.device)  # where each real step sits in `features`
+        sorted_mask = mask[order]
+        time_major = row[order].T[sorted_mask.T]  # packed order: step t of every sequence longer than t
+        batch_sizes = sorted_mask.sum(dim=0).cpu()
+        packed = PackedSequence(features[time_major], batch_sizes[batch_sizes > 0], order, torch.argsort(order))
+        output, _ = self.rnn(packed, self._to_rnn(start_state.to(features.dtype)))
+        result = torch.empty_like(output.data)
+        result[time_major] = output.data
+        return result
 
     def _to_rnn(self, state: Tensor) -> Tensor | tuple[Tensor, Tensor]:
         if self.kind == "gru":
@@ -230,14 +246,15 @@ class ActorCritic(nn.Module):
         """Features (N, F) of a flat batch of steps."""
         features = [self.image_encoder(inputs["image"])]
         if self.vector_encoder is not None:
+            dtype = compute_dtype(self.vector_encoder[0].weight)
             vector = []
             if "vector" in inputs:
-                vector.append(inputs["vector"])
+                vector.append(inputs["vector"].to(dtype))
             if "previous_action" in inputs:
                 one_hots = [F.one_hot(inputs["previous_action"][:, i], n) for i, n in enumerate(self.action_dims)]
-                vector.extend(one_hot.float() for one_hot in one_hots)
+                vector.extend(one_hot.to(dtype) for one_hot in one_hots)
             if "previous_reward" in inputs:
-                vector.append(inputs["previous_reward"].unsqueeze(-1))
+                vector.append(inputs["previous_reward"].unsqueeze(-1).to(dtype))
             features.append(self.vector_encoder(torch.cat(vector, dim=-1)))
         return torch.cat(features, dim=-1) if len(features) > 1 else features[0]
 

@@ -140,7 +140,7 @@ def ppo_update(
             )
             optimizer.zero_grad(set_to_none=True)
             loss.total.backward()
-            grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm)
+            grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm, foreach=True)
             if not torch.isfinite(torch.stack((loss.total.detach(), grad_norm))).all():  # one device sync
                 raise FloatingPointError(f"non-finite loss or gradient in epoch {epoch}: {_describe(loss, grad_norm)}")
             optimizer.step()
@@ -165,5 +165,7 @@ def explained_variance(values: Tensor, returns: Tensor) -> float:
 
 
 def _describe(loss: LossTerms, grad_norm: Tensor) -> str:
-    terms = ", ".join(f"{name} loss {float(getattr(loss, name).detach()):.4g}" for name in ("policy", "value", "entropy"))
+    terms = ", ".join(
+        f"{name} loss {float(getattr(loss, name).detach()):.4g}" for name in ("policy", "value", "entropy")
+    )
     return f"{terms}, gradient norm {float(grad_norm):.4g}"

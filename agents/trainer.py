@@ -14,6 +14,7 @@ the same weights as an uninterrupted one.
 from __future__ import annotations
 
 import contextlib
+import copy
 import datetime
 import hashlib
 import io
@@ -74,7 +75,9 @@ class Trainer:
         self.core = envs.make_core(config.env.id, config.run.workers, config.env.options)
         self.action_space = self.core.single_action_space
         self.model = ActorCritic(self.core.single_observation_space, self.action_space, config.model).to(self.device)
-        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.ppo.learning_rate.initial)
+        # The fused kernel updates all parameters at once: ~10x faster than the per-tensor loop on CPU.
+        self.rollout_model = self._make_rollout_model()
+        self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.ppo.learning_rate.initial, fused=True)
         branches = len(self.model.action_dims)
         state_shape = self.model.state_shape
         self.buffer = RolloutBuffer(
@@ -116,7 +119,7 @@ class Trainer:
         progress = _progress_bar(self.config, self.global_step)
         try:
             while self.update < self.num_updates:
-                metrics = self._train_one_update()
+                metrics = self.train_update()
                 self.history.append(metrics)
                 _log(writer, metrics, self.global_step)
                 _show(progress, metrics, self.recent_returns, self.config.batch_size)
@@ -130,7 +133,8 @@ class Trainer:
         return self.history
 
     # ------------------------------------------------------------------------------------------- one update
-    def _train_one_update(self) -> dict[str, float]:
+    def train_update(self) -> dict[str, float]:
+        """One update: collect a rollout, compute advantages, run the PPO epochs. Returns its metrics."""
         config, update = self.config, self.update
         learning_rate = config.ppo.learning_rate.value(update, self.num_updates)
         entropy_coef = config.ppo.entropy_coef.value(update, self.num_updates)
@@ -143,8 +147,8 @@ class Trainer:
         rollout_seconds = time.perf_counter() - started
 
         buffer = self.buffer
-        with torch.inference_mode(), self._autocast():
-            _, last_values, _ = self.model.step(self._current_inputs(), self.memory_state)
+        with torch.inference_mode():
+            _, last_values, _ = self.rollout_model.step(self._current_inputs(), self.memory_state)
         buffer.advantages.copy_(
             gae_advantages(
                 buffer.rewards,
@@ -173,6 +177,7 @@ class Trainer:
             last = latest_checkpoint(self.run_dir)
             kept = f"the last good checkpoint is {last}" if last else "no checkpoint was written yet"
             raise TrainingDiverged(f"training stopped at update {update + 1}: {err}; {kept}") from err
+        self._refresh_rollout_model()
         self.update += 1
         self.global_step += config.batch_size
         seconds = time.perf_counter() - started
@@ -201,8 +206,7 @@ class Trainer:
                 for name, value in inputs.items():
                     buffer.inputs[name][:, t] = value
                 buffer.memory_states[:, t] = self.memory_state
-                with self._autocast():
-                    logits, values, next_state = self.model.step(inputs, self.memory_state)
+                logits, values, next_state = self.rollout_model.step(inputs, self.memory_state)
                 actions, log_probs = sample_actions(logits, self.action_generator)
                 buffer.actions[:, t] = actions
                 buffer.log_probs[:, t] = log_probs
@@ -253,6 +257,20 @@ class Trainer:
             return 1  # no recurrence: every step is a sequence of its own, no padding exists
         length = self.config.ppo.sequence_length
         return None if length == "max" else int(length)
+
+    def _make_rollout_model(self) -> ActorCritic:
+        """The model that acts in the rollout. With bf16 it is a bfloat16 copy of the weights, refreshed after every
+        update: acting at a batch of one step per worker is bound by reading the weights, and autocast would cast
+        them anew at every step. With fp32 it is the model itself."""
+        if self.config.run.precision != "bf16":
+            return self.model
+        return copy.deepcopy(self.model).to(torch.bfloat16).requires_grad_(False)
+
+    def _refresh_rollout_model(self) -> None:
+        if self.rollout_model is not self.model:
+            with torch.no_grad():
+                for low, weight in zip(self.rollout_model.parameters(), self.model.parameters(), strict=True):
+                    low.copy_(weight)
 
     def _autocast(self) -> contextlib.AbstractContextManager:
         enabled = self.config.run.precision == "bf16"
@@ -308,13 +326,15 @@ class Trainer:
         return path
 
     def load_checkpoint(self, path: str | Path) -> None:
-        state = torch.load(path, map_location=self.device, weights_only=False)
+        # Loaded on the CPU: RNG states must stay CPU tensors; weights and optimizer state move to their device.
+        state = torch.load(path, map_location="cpu", weights_only=False)
         if state.get("format") != CHECKPOINT_FORMAT:
             raise ValueError(f"{path}: checkpoint format {state.get('format')!r}, expected {CHECKPOINT_FORMAT}")
         if state["config"] != config_to_dict(self.config):
             raise ValueError(f"{path} was written by a different config than {self.run_dir / 'config.yaml'}")
         self.update, self.global_step = state["update"], state["global_step"]
         self.model.load_state_dict(state["model"])
+        self._refresh_rollout_model()
         self.optimizer.load_state_dict(state["optimizer"])
         rng = state["rng"]
         torch.set_rng_state(rng["torch"])

@@ -4,22 +4,19 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-import envs
 from agents.config import config_from_dict, load_config
 from agents.models import log_probs_and_entropy
 from agents.sequences import pad_sequences, split_sequences
 from agents.trainer import Trainer, TrainingDiverged, latest_checkpoint
-from envs.core import BatchedCore, Index
 from scripts import train as train_script
+from tests.dict_env import DictCore
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
@@ -29,72 +26,20 @@ TINY = {
 }
 
 
-class DictCore(BatchedCore):
-    """A synthetic Dict-observation, MultiDiscrete env: random episode lengths, rewards that use the slot's
-    generator during steps (so exact resume needs the generator state), numeric and non-numeric final infos."""
-
-    env_name = "TestDict-v0"
-    option_specs = {}
-    single_observation_space = gym.spaces.Dict(
-        {
-            "visual_observation": gym.spaces.Box(0, 255, (36, 36, 3), np.uint8),
-            "vector_observation": gym.spaces.Box(-1.0, 1.0, (4,), np.float32),
-        }
-    )
-    single_action_space = gym.spaces.MultiDiscrete([3, 2])
-
-    def __init__(self, num_envs: int = 1, options: dict[str, Any] | None = None) -> None:
-        super().__init__(num_envs, options)
-        self.t = np.zeros(num_envs, dtype=np.int64)
-        self.length = np.zeros(num_envs, dtype=np.int64)
-        self.target = np.zeros(num_envs, dtype=np.int64)
-        self.hits = np.zeros(num_envs, dtype=np.int64)
-        self.images = np.zeros((num_envs, 36, 36, 3), dtype=np.uint8)
-
-    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
-        self.t[k], self.hits[k] = 0, 0
-        self.length[k] = rng.integers(2, 12)
-        self.target[k] = rng.integers(0, 3)
-        self.images[k] = rng.integers(0, 256, (36, 36, 3), dtype=np.uint8)
-
-    def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        rewards = np.zeros(len(self.slots(idx)))
-        for i, k in enumerate(self.slots(idx)):
-            hit = actions[i, 0] == self.target[k]
-            self.hits[k] += hit
-            rewards[i] = 0.1 * hit + 0.01 * self.rngs[k].random()
-            self.images[k, self.t[k] % 36] = self.rngs[k].integers(0, 256)
-        self.t[idx] += 1
-        return rewards, self.t[idx] >= self.length[idx]
-
-    def _observation(self, idx: Index) -> dict[str, np.ndarray]:
-        vector = np.stack([self.t[idx] / 12, self.target[idx] / 3, self.hits[idx] / 12, self.length[idx] / 12], -1)
-        return {"visual_observation": self.images[idx], "vector_observation": vector.astype(np.float32)}
-
-    def _final_info(self, k: int) -> dict[str, Any]:
-        return {"hits": int(self.hits[k]), "label": "not a number"}
-
-
-@pytest.fixture
-def dict_env(monkeypatch: pytest.MonkeyPatch) -> str:
-    monkeypatch.setitem(envs.ENV_IDS, "TestDict-v0", ("tests.test_trainer:DictCore", {}))
-    return "TestDict-v0"
-
-
 def _config(*overrides: str, raw: dict | None = None):
     return config_from_dict(raw or TINY, list(overrides))
 
 
 def _kill_after(trainer: Trainer, updates: int) -> None:
     """Make ``trainer.train()`` die like a killed process once ``updates`` updates are done."""
-    run_update = trainer._train_one_update
+    run_update = trainer.train_update
 
     def maybe_die() -> dict[str, float]:
         if trainer.update == updates:
             raise KeyboardInterrupt
         return run_update()
 
-    trainer._train_one_update = maybe_die  # type: ignore[method-assign]
+    trainer.train_update = maybe_die  # type: ignore[method-assign]
 
 
 def _assert_same_weights(a: Trainer, b: Trainer) -> None:
@@ -108,8 +53,9 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         ("model.memory=gru", "ppo.sequence_length=max"),
         ("model.memory=lstm", "ppo.sequence_length=3"),
         ("model.memory=none", "model.previous_action=true", "model.previous_reward=true"),
+        ("model.memory=gru", "run.precision=bf16"),
     ],
-    ids=["gru-max", "lstm-3", "none"],
+    ids=["gru-max", "lstm-3", "none", "gru-bf16"],
 )
 def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overrides: tuple[str, ...]) -> None:
     config = _config(*overrides, "run.checkpoint_interval=2")
@@ -283,3 +229,26 @@ def test_command_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     with pytest.raises(SystemExit):
         train_script.main(["--config", str(config_path), "--run-dir", str(run_dir)])  # would overwrite a run
     assert train_script.main(["--resume", str(tmp_path / "missing")]) == 2
+
+
+def test_bf16_acts_with_a_bfloat16_copy_of_the_weights(tmp_path: Path, dict_env: str) -> None:
+    config = _config(f"env.id={dict_env}", "env.options={}", "model.previous_action=true", "run.precision=bf16")
+    trainer = Trainer(config, tmp_path)
+    assert trainer.rollout_model is not trainer.model
+    trainer.train_update()
+    for low, weight in zip(trainer.rollout_model.parameters(), trainer.model.parameters(), strict=True):
+        assert low.dtype == torch.bfloat16 and weight.dtype == torch.float32
+        assert torch.equal(low, weight.to(torch.bfloat16))  # refreshed after the update
+    trainer._collect_rollout()
+    buffer = trainer.buffer
+    sequences = split_sequences(buffer.terminated.numpy(), None)
+    batch = pad_sequences(sequences, np.arange(len(sequences)))
+    inputs = {name: buffer.flat(t)[batch.step_index] for name, t in buffer.inputs.items()}
+    with torch.no_grad(), trainer._autocast():
+        logits, values = trainer.model.evaluate(
+            inputs, buffer.flat(buffer.memory_states)[batch.start_index], batch.mask
+        )
+    log_probs, _ = log_probs_and_entropy(logits, buffer.flat(buffer.actions)[batch.step_index])
+    # acting in bfloat16 and training under bf16 autocast agree to bfloat16 precision: the first ratios are ~1
+    ratio = (log_probs - buffer.flat(buffer.log_probs)[batch.step_index]).exp()
+    assert (ratio - 1).abs().max() < 0.05
