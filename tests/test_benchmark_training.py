@@ -35,9 +35,10 @@ def test_benchmark_writes_a_complete_record(tmp_path: Path, dict_env: str) -> No
     assert benchmark_training.main(args) == 0
     record = json.loads(out.read_text())
     summary = record["summary"]
-    assert summary["end_to_end_steps_per_s"] > 0 and summary["bound_steps_per_s"] > 0
-    assert summary["end_to_end_over_bound"] == summary["end_to_end_steps_per_s"] / summary["bound_steps_per_s"]
-    assert summary["sb3_recurrent_ppo_steps_per_s"] is None
+    for how in ("median", "best"):
+        end, bound = summary[f"{how}_end_to_end_steps_per_s"], summary[f"{how}_bound_steps_per_s"]
+        assert end > 0 and bound > 0 and summary[f"{how}_end_to_end_over_bound"] == end / bound
+        assert summary[f"{how}_sb3_recurrent_ppo_steps_per_s"] is None
     assert record["setting"]["batch"] == 32 and record["setting"]["env"] == dict_env
     assert set(record["versions"]) >= {"python", "torch", "numpy", "gymnasium"}
     assert record["git"]["revision"] and record["machine"]["cpu_count"]
