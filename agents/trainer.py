@@ -75,8 +75,8 @@ class Trainer:
         self.core = envs.make_core(config.env.id, config.run.workers, config.env.options)
         self.action_space = self.core.single_action_space
         self.model = ActorCritic(self.core.single_observation_space, self.action_space, config.model).to(self.device)
-        # The fused kernel updates all parameters at once: ~10x faster than the per-tensor loop on CPU.
         self.rollout_model = self._make_rollout_model()
+        # The fused kernel updates all parameters at once: ~10x faster than the per-tensor loop on CPU.
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.ppo.learning_rate.initial, fused=True)
         branches = len(self.model.action_dims)
         state_shape = self.model.state_shape

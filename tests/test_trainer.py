@@ -252,3 +252,9 @@ def test_bf16_acts_with_a_bfloat16_copy_of_the_weights(tmp_path: Path, dict_env:
     # acting in bfloat16 and training under bf16 autocast agree to bfloat16 precision: the first ratios are ~1
     ratio = (log_probs - buffer.flat(buffer.log_probs)[batch.step_index]).exp()
     assert (ratio - 1).abs().max() < 0.05
+
+
+def test_a_config_with_a_grid_is_refused(tmp_path: Path) -> None:
+    config = _config("run.seed=1", raw={**TINY, "grid": {"run.seed": [1, 2]}})
+    with pytest.raises(ValueError, match="grid"):
+        Trainer(config, tmp_path)
