@@ -1,0 +1,429 @@
+"""Typed, documented training configuration loaded from YAML.
+
+A config file has the blocks ``env``, ``model``, ``ppo`` and ``run`` (and an optional ``grid`` reserved for sweeps);
+every block is a dataclass below and every field documents itself. Loading is strict: an unknown key fails with the
+closest valid name, a value of the wrong type or outside its range fails with what would have been valid.
+Command-line overrides (``--set ppo.gamma=0.995``) are parsed as YAML scalars and validated the same way.
+
+Example::
+
+    env:   {id: ProofOfMemory-v0, options: {delay: 4}}
+    model: {memory: gru, memory_size: 64, hidden_size: 64}
+    ppo:   {learning_rate: {initial: 3.0e-4, final: 1.0e-4}, sequence_length: max}
+    run:   {total_steps: 200000, workers: 16, worker_steps: 64, seed: 1}
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import numbers
+import types
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
+
+import yaml
+
+import envs
+
+MEMORY_KINDS = ("none", "gru", "lstm")  # "trxl" joins here once agents.models implements it
+ENCODER_KINDS = ("nature_cnn",)
+
+
+class ConfigError(ValueError):
+    """A config key or value is invalid; the message names the key and what would have been valid."""
+
+
+def param(default: Any, doc: str, low: float | None = None, high: float | None = None, expect: str = "") -> Any:
+    """A config field with its documentation, (inclusive) numeric bounds and, for unions, what it expects."""
+    factory = (lambda: default.copy()) if isinstance(default, dict | list) else None
+    meta = {"doc": doc, "low": low, "high": high, "expect": expect}
+    if factory is not None:
+        return field(default_factory=factory, metadata=meta)
+    if dataclasses.is_dataclass(default):
+        return field(default_factory=lambda: dataclasses.replace(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass
+class Schedule:
+    """A value that decays linearly from ``initial`` to ``final`` over ``decay_updates`` PPO updates.
+
+    In YAML a plain number is a constant; ``{initial: 3.0e-4, final: 1.0e-4}`` decays over the whole run.
+    """
+
+    initial: float = param(0.0, "value at the first update", low=0.0)
+    final: float | None = param(None, "value reached after decay_updates updates (null: constant)", low=0.0)
+    decay_updates: int | None = param(None, "updates until final is reached (null: the whole run)", low=1)
+
+    def value(self, update: int, num_updates: int) -> float:
+        """The value used by update ``update`` (0-based) of a run of ``num_updates`` updates."""
+        if self.final is None:
+            return self.initial
+        horizon = self.decay_updates or num_updates
+        progress = min(update / horizon, 1.0)
+        return self.initial + (self.final - self.initial) * progress
+
+
+@dataclass
+class EnvConfig:
+    """Which environment to train on and how its episodes are seeded."""
+
+    id: str = param("ProofOfMemory-v0", "environment id (see envs.ENV_IDS)")
+    options: dict[str, Any] = param({}, "reset options of the environment (its own names and ranges)")
+    train_seeds: list[int] = param([0, 99_999], "inclusive range [low, high] that episode seeds are drawn from")
+
+
+@dataclass
+class ModelConfig:
+    """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
+
+    encoder: str = param("nature_cnn", f"visual encoder, one of {ENCODER_KINDS}")
+    memory: str = param("gru", f"memory module, one of {MEMORY_KINDS}")
+    memory_size: int = param(512, "hidden units of the recurrent layer", low=1)
+    memory_layers: int = param(1, "stacked recurrent layers", low=1)
+    hidden_size: int = param(512, "units of the body layer and of each of the policy and value streams", low=1)
+    vector_encoder_size: int = param(128, "units of the encoder of vector inputs (vector obs, previous action/reward)")
+    previous_action: bool = param(False, "feed the previous action (one-hot per branch, zeros at reset)")
+    previous_reward: bool = param(False, "feed the previous reward (zero at reset)")
+
+
+@dataclass
+class PPOConfig:
+    """PPO with GAE; the defaults are the paper's Table 6."""
+
+    gamma: float = param(0.99, "discount factor", low=0.0, high=1.0)
+    gae_lambda: float = param(0.95, "GAE lambda", low=0.0, high=1.0)
+    epochs: int = param(3, "passes over each batch", low=1)
+    minibatches: int = param(8, "minibatches per epoch (equal numbers of sequences)", low=1)
+    learning_rate: Schedule = param(Schedule(3e-4, 1e-4), "AdamW learning rate (linear schedule)")
+    entropy_coef: Schedule = param(Schedule(1e-4, 1e-5), "entropy bonus coefficient (linear schedule)")
+    clip_range: Schedule = param(Schedule(0.2), "PPO clip range of the policy ratio (and of the value)")
+    clip_value_loss: bool = param(True, "clip the value loss with the clip range (max of clipped and unclipped)")
+    value_coef: float = param(0.25, "value loss coefficient", low=0.0)
+    max_grad_norm: float = param(0.5, "global gradient-norm clip", low=0.0)
+    advantage_normalization: str = param("minibatch", "normalise advantages per 'minibatch', per 'batch' or 'none'")
+    sequence_length: int | str = param(
+        "max", "BPTT sequence length: an int >= 1 or 'max' (the longest episode)", expect="an int >= 1 or 'max'"
+    )
+
+
+@dataclass
+class RunConfig:
+    """How long, how wide and where to train."""
+
+    total_steps: int = param(163_840_000, "environment steps (rounded down to whole updates)", low=1)
+    workers: int = param(32, "environments stepped in parallel (slots of one batched core)", low=1)
+    worker_steps: int = param(512, "steps per worker per rollout", low=1)
+    device: str = param("cpu", "torch device: 'cpu' or 'cuda' (or 'cuda:N')")
+    precision: str = param("fp32", "'fp32', or 'bf16': autocast (convolutions, matmuls, GRU in bfloat16)")
+    torch_threads: int = param(0, "torch intra-op threads (0: one per CPU core)", low=0)
+    seed: int = param(0, "seed of the model init, action sampling, minibatch shuffling and episode seeds", low=0)
+    checkpoint_interval: int = param(100, "updates between checkpoints (0: only at the end)", low=0)
+    keep_checkpoints: int = param(2, "most recent checkpoints kept on disk (0: keep all)", low=0)
+    progress_bar: bool = param(True, "show a tqdm progress bar")
+
+
+@dataclass
+class Config:
+    """A whole training run. ``grid`` (dotted key -> list of values) is expanded by the sweep tool, not here."""
+
+    env: EnvConfig = param(EnvConfig(), "environment")
+    model: ModelConfig = param(ModelConfig(), "actor-critic model")
+    ppo: PPOConfig = param(PPOConfig(), "PPO hyperparameters")
+    run: RunConfig = param(RunConfig(), "run length, width, device and seed")
+    grid: dict[str, list] = param({}, "swept keys for scripts/sweep.py: {dotted.key: [values]}")
+
+    @property
+    def batch_size(self) -> int:
+        return self.run.workers * self.run.worker_steps
+
+    @property
+    def num_updates(self) -> int:
+        return self.run.total_steps // self.batch_size
+
+
+# ------------------------------------------------------------------------------------------------- loading
+def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Config:
+    """Read a YAML config, apply ``key=value`` overrides and validate everything."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {str(path)!r} does not exist")
+    raw = yaml.safe_load(path.read_text()) or {}
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level, got {type(raw).__name__}")
+    return config_from_dict(raw, overrides)
+
+
+def config_from_dict(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> Config:
+    """Build a validated :class:`Config` from nested dicts plus ``key=value`` overrides."""
+    merged = _deep_copy(raw)
+    for item in overrides:
+        key, value = parse_override(item)
+        _set_dotted(merged, key, value)
+    config = _build(Config, merged, prefix="")
+    _check_cross_fields(config)
+    return config
+
+
+def parse_override(item: str) -> tuple[str, Any]:
+    """Split ``a.b=value`` and parse the value as a YAML scalar (``0.1``, ``true``, ``[0, 9]``, ``max``)."""
+    key, sep, text = item.partition("=")
+    if not sep or not key.strip():
+        raise ConfigError(f"override {item!r} is invalid: expected KEY=VALUE, e.g. ppo.gamma=0.995")
+    try:
+        value = yaml.safe_load(text) if text.strip() else ""
+    except yaml.YAMLError as err:
+        raise ConfigError(f"override {item!r}: cannot parse the value {text!r} ({err})") from err
+    return key.strip(), value
+
+
+def config_to_dict(config: Any) -> Any:
+    """The config as plain nested dicts/lists (what ``config.yaml`` of a run holds)."""
+    if dataclasses.is_dataclass(config):
+        return {f.name: config_to_dict(getattr(config, f.name)) for f in dataclasses.fields(config)}
+    if isinstance(config, dict):
+        return {k: config_to_dict(v) for k, v in config.items()}
+    if isinstance(config, list | tuple):
+        return [config_to_dict(v) for v in config]
+    return config
+
+
+def dump_config(config: Config) -> str:
+    return yaml.safe_dump(config_to_dict(config), sort_keys=False)
+
+
+def _deep_copy(raw: Any) -> Any:
+    if isinstance(raw, Mapping):
+        return {k: _deep_copy(v) for k, v in raw.items()}
+    if isinstance(raw, list):
+        return [_deep_copy(v) for v in raw]
+    return raw
+
+
+def _set_dotted(tree: dict, key: str, value: Any) -> None:
+    """Set ``tree[a][b] = value`` for ``key = "a.b"``, checking each part against the dataclass fields."""
+    parts = key.split(".")
+    cls: Any = Config
+    node = tree
+    for depth, part in enumerate(parts):
+        here = ".".join(parts[: depth + 1])
+        if cls is None:  # inside a free-form mapping (env.options): any key is allowed here
+            pass
+        else:
+            names = [f.name for f in dataclasses.fields(cls)]
+            if part not in names:
+                raise ConfigError(_unknown_key_message(here, part, names))
+        last = depth == len(parts) - 1
+        if last:
+            node[part] = value
+            return
+        child_type = _field_type(cls, part) if cls is not None else None
+        if cls is not None and not (_is_dataclass_type(child_type) or _is_mapping_type(child_type)):
+            raise ConfigError(f"key {key!r}: {here!r} is a {_type_name(child_type)}, it has no sub-keys")
+        if child_type is Schedule and _is_number(node.get(part)):
+            node[part] = _constant_schedule(node[part])
+        elif not isinstance(node.get(part), dict):
+            node[part] = {}
+        node = node[part]
+        cls = child_type if _is_dataclass_type(child_type) else None
+
+
+def _constant_schedule(value: float) -> dict:
+    """A plain number written for a schedule: that value, constant."""
+    return {"initial": value, "final": None, "decay_updates": None}
+
+
+def _build(cls: type, raw: Any, prefix: str, defaults: Any = None) -> Any:
+    """An instance of dataclass ``cls`` from ``raw``; missing keys come from ``defaults`` (or the class)."""
+    if cls is Schedule and _is_number(raw):
+        raw = _constant_schedule(raw)
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"{prefix or 'config'} must be a mapping of keys to values, got {raw!r}")
+    names = [f.name for f in dataclasses.fields(cls)]
+    for key in raw:
+        if key not in names:
+            raise ConfigError(_unknown_key_message(_join(prefix, str(key)), str(key), names))
+    hints = get_type_hints(cls)
+    defaults = cls() if defaults is None else defaults
+    values = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in raw:
+            continue
+        key, tp = _join(prefix, f.name), hints[f.name]
+        if _is_dataclass_type(tp):  # a partial block keeps this field's own defaults for the keys it omits
+            values[f.name] = _build(tp, raw[f.name], key, defaults=getattr(defaults, f.name))
+        else:
+            values[f.name] = _convert(tp, raw[f.name], key, f.metadata)
+    instance = dataclasses.replace(defaults, **values)
+    _check_block(instance, prefix)
+    return instance
+
+
+def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any]) -> Any:
+    """Validate one value against its annotated type and bounds; return it in canonical form."""
+    origin, args = get_origin(tp), get_args(tp)
+    if origin in (Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for option in (a for a in args if a is not type(None)):
+            try:
+                return _convert(option, value, key, meta)
+            except ConfigError as err:
+                errors.append(str(err))
+        expected = meta.get("expect") or _describe(tp)
+        raise ConfigError(errors[0] if len(errors) == 1 else f"{key}={value!r} is invalid: expected {expected}")
+    if origin is Literal:
+        if value not in args:
+            raise ConfigError(f"{key}={value!r} is invalid; valid choices: {', '.join(map(repr, args))}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}={value!r} is invalid: expected true or false")
+        return value
+    if tp in (int, float):
+        return _number(tp, value, key, meta)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}={value!r} is invalid: expected a string")
+        return value
+    if origin is list:
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{key}={value!r} is invalid: expected a list")
+        (item_type,) = args or (Any,)
+        return [value_ if item_type is Any else _convert(item_type, value_, key, {}) for value_ in value]
+    if origin is dict:
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{key}={value!r} is invalid: expected a mapping")
+        return _deep_copy(dict(value))
+    raise TypeError(f"config field {key} has an unsupported annotation {tp!r}")  # a bug in this module
+
+
+def _number(tp: type, value: Any, key: str, meta: Mapping[str, Any]) -> int | float:
+    low, high = meta.get("low"), meta.get("high")
+    bounds = ""
+    if low is not None or high is not None:
+        bounds = f" in [{'-inf' if low is None else f'{low:g}'}, {'inf' if high is None else f'{high:g}'}]"
+    expected = f"{'an int' if tp is int else 'a number'}{bounds}"
+    if tp is float and isinstance(value, str):
+        value = _float_or_text(value)  # YAML 1.1 reads 1e-5 (no dot) as a string
+    if isinstance(value, bool) or not _is_number(value) or (tp is int and not isinstance(value, numbers.Integral)):
+        raise ConfigError(f"{key}={value!r} is invalid: expected {expected}")
+    value = int(value) if tp is int else float(value)
+    if not math.isfinite(value) or (low is not None and value < low) or (high is not None and value > high):
+        raise ConfigError(f"{key}={value!r} is invalid: expected {expected}")
+    return value
+
+
+def _check_block(block: Any, prefix: str) -> None:
+    """Checks of one block that a type annotation cannot express."""
+    if isinstance(block, Schedule):
+        return
+    if isinstance(block, EnvConfig):
+        _check_env(block, prefix)
+    elif isinstance(block, ModelConfig):
+        _choice(f"{prefix}.encoder", block.encoder, ENCODER_KINDS)
+        _choice(f"{prefix}.memory", block.memory, MEMORY_KINDS)
+    elif isinstance(block, PPOConfig):
+        _choice(f"{prefix}.advantage_normalization", block.advantage_normalization, ("minibatch", "batch", "none"))
+        length = block.sequence_length
+        if isinstance(length, str) and length != "max" or isinstance(length, int) and length < 1:
+            raise ConfigError(f"{prefix}.sequence_length={length!r} is invalid: expected an int >= 1 or 'max'")
+    elif isinstance(block, RunConfig):
+        _choice(f"{prefix}.precision", block.precision, ("fp32", "bf16"))
+        device = block.device
+        if not (device == "cpu" or device == "cuda" or device.startswith("cuda:") and device[5:].isdigit()):
+            raise ConfigError(f"{prefix}.device={device!r} is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'")
+
+
+def _check_env(block: EnvConfig, prefix: str) -> None:
+    if block.id not in envs.ENV_IDS:
+        ids = list(envs.ENV_IDS)
+        close = difflib.get_close_matches(block.id, ids, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(f"{prefix}.id={block.id!r} is unknown{hint}; valid ids: {', '.join(ids)}")
+    try:  # a one-slot core validates the options exactly as training will (families differ per variant)
+        envs.make_core(block.id, 1, block.options)
+    except ValueError as err:
+        raise ConfigError(f"{prefix}.options: {err}") from err
+    seeds = block.train_seeds
+    if len(seeds) != 2 or not 0 <= seeds[0] <= seeds[1]:
+        raise ConfigError(f"{prefix}.train_seeds={seeds!r} is invalid: expected [low, high] with 0 <= low <= high")
+
+
+def _check_cross_fields(config: Config) -> None:
+    if config.run.total_steps < config.batch_size:
+        raise ConfigError(
+            f"run.total_steps={config.run.total_steps} is smaller than one batch "
+            f"(run.workers x run.worker_steps = {config.batch_size}): expected at least {config.batch_size}"
+        )
+    if config.model.memory == "none" and config.ppo.sequence_length not in ("max", 1):
+        raise ConfigError(
+            f"ppo.sequence_length={config.ppo.sequence_length!r} needs a memory module; "
+            "with model.memory=none use 'max' or 1 (every step is its own sequence)"
+        )
+    for key, values in config.grid.items():
+        if not isinstance(values, list) or not values:
+            raise ConfigError(f"grid.{key}={values!r} is invalid: expected a non-empty list of values")
+        if key.split(".")[0] == "grid":
+            raise ConfigError(f"grid.{key}: the grid cannot sweep itself")
+        for value in values:  # every swept value must make a valid config on its own
+            trial = config_to_dict(config)
+            trial["grid"] = {}
+            _set_dotted(trial, key, value)
+            _check_cross_fields(_build(Config, trial, prefix=""))
+
+
+def _choice(key: str, value: str, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        close = difflib.get_close_matches(str(value), choices, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(f"{key}={value!r} is invalid{hint}; valid choices: {', '.join(choices)}")
+
+
+def _unknown_key_message(full_key: str, key: str, names: list[str]) -> str:
+    close = difflib.get_close_matches(key, names, n=1, cutoff=0.5)
+    parent = full_key[: -len(key)]
+    hint = f" (did you mean {parent + close[0]!r}?)" if close else ""
+    return f"unknown config key {full_key!r}{hint}; valid keys here: {', '.join(names)}"
+
+
+def _join(prefix: str, key: str) -> str:
+    return f"{prefix}.{key}" if prefix else key
+
+
+def _float_or_text(text: str) -> float | str:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _is_dataclass_type(tp: Any) -> bool:
+    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
+def _is_mapping_type(tp: Any) -> bool:
+    return get_origin(tp) is dict
+
+
+def _field_type(cls: type, name: str) -> Any:
+    return get_type_hints(cls)[name]
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", str(tp))
+
+
+def _describe(tp: Any) -> str:
+    args = [a for a in get_args(tp) if a is not type(None)]
+    names = {int: "an int", float: "a number", str: "a string", bool: "true or false"}
+    return " or ".join(names.get(a, _type_name(a)) for a in args)

@@ -1,0 +1,300 @@
+"""The actor-critic, assembled from parts.
+
+::
+
+    image (uint8 HWC) -> Nature CNN --------------------------+
+    vector obs, previous action (one-hot), previous reward ---+-> concat -> memory -> body FC -> policy FC -> heads
+                                -> Linear(128) + ReLU --------+                               -> value FC  -> value
+
+The memory module is ``none`` (identity), ``gru`` or ``lstm``. Non-recurrent layers always see a flat batch of
+real steps; only the memory module sees the (sequences, length) layout, which it takes from the padding mask of
+the minibatch (:meth:`RecurrentMemory.sequences`, which runs the recurrence packed, so padding costs nothing).
+A memory module keeps its state as one tensor per environment
+(``state_shape``), so the buffer stores it like any other field. A transformer memory (``trxl``) or a HELM branch
+(a frozen feature extractor whose outputs the buffer caches) plug into the same seams: a new entry in
+:data:`MEMORY_MODULES`, or a new encoder concatenated in :meth:`ActorCritic.encode`.
+
+Initialisation (baselines.md 1.5): orthogonal weights with gain sqrt(2) for hidden and recurrent layers, 0.1 for
+the policy heads, 1 for the value head; all biases 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import Tensor, nn
+from torch.nn import functional as F
+from torch.nn.utils.rnn import PackedSequence
+
+from agents.config import MEMORY_KINDS, ModelConfig
+
+HIDDEN_GAIN = math.sqrt(2)
+POLICY_GAIN = 0.1
+VALUE_GAIN = 1.0
+
+
+@dataclass(frozen=True)
+class InputField:
+    """One model input per environment step: its per-step shape and dtype (what the buffer stores)."""
+
+    shape: tuple[int, ...]
+    dtype: torch.dtype
+
+
+def action_branches(action_space: gym.Space) -> list[int]:
+    """Number of choices of every action dimension: ``[n]`` for Discrete(n), ``nvec`` for MultiDiscrete."""
+    if isinstance(action_space, gym.spaces.Discrete):
+        return [int(action_space.n)]
+    if isinstance(action_space, gym.spaces.MultiDiscrete) and action_space.nvec.ndim == 1:
+        return [int(n) for n in action_space.nvec]
+    raise ValueError(f"unsupported action space {action_space}: expected Discrete or 1-d MultiDiscrete")
+
+
+def model_inputs(observation_space: gym.Space, action_space: gym.Space, config: ModelConfig) -> dict[str, InputField]:
+    """The inputs the model takes at every step.
+
+    ``image``: uint8 (H, W, C); ``vector``: float32 (D,) when the observation has a vector part;
+    ``previous_action``: int64 (branches,) and ``previous_reward``: float32 () when the config feeds them.
+    """
+    if isinstance(observation_space, gym.spaces.Dict):
+        unknown = set(observation_space.spaces) - {"visual_observation", "vector_observation"}
+        if unknown or "visual_observation" not in observation_space.spaces:
+            raise ValueError(
+                f"unsupported Dict observation keys {sorted(observation_space.spaces)}: expected "
+                "'visual_observation' and optionally 'vector_observation'"
+            )
+        image_space = observation_space["visual_observation"]
+        vector_space = observation_space.spaces.get("vector_observation")
+    else:
+        image_space, vector_space = observation_space, None
+    if not (isinstance(image_space, gym.spaces.Box) and image_space.dtype == np.uint8 and len(image_space.shape) == 3):
+        raise ValueError(f"unsupported image space {image_space}: expected a uint8 Box of shape (H, W, C)")
+    fields = {"image": InputField(tuple(image_space.shape), torch.uint8)}
+    if vector_space is not None:
+        fields["vector"] = InputField((int(np.prod(vector_space.shape)),), torch.float32)
+    if config.previous_action:
+        fields["previous_action"] = InputField((len(action_branches(action_space)),), torch.int64)
+    if config.previous_reward:
+        fields["previous_reward"] = InputField((), torch.float32)
+    return fields
+
+
+def compute_dtype(weight: Tensor) -> torch.dtype:
+    """The dtype a layer computes in: the autocast type when autocast is on, else its weights' own type."""
+    device = weight.device.type
+    return torch.get_autocast_dtype(device) if torch.is_autocast_enabled(device) else weight.dtype
+
+
+def orthogonal(layer: nn.Module, gain: float) -> nn.Module:
+    """Orthogonal weights with ``gain`` and zero biases, in place; returns the layer."""
+    for name, param in layer.named_parameters():
+        if "weight" in name:
+            nn.init.orthogonal_(param, gain)
+        elif "bias" in name:
+            nn.init.zeros_(param)
+    return layer
+
+
+class NatureCNN(nn.Module):
+    """Three convolutions (32 8x8/4, 64 4x4/2, 64 3x3/1) with ReLU on uint8 HWC images, flattened."""
+
+    def __init__(self, image_shape: tuple[int, int, int]) -> None:
+        super().__init__()
+        height, width, channels = image_shape
+        self.convs = nn.Sequential(
+            orthogonal(nn.Conv2d(channels, 32, 8, stride=4), HIDDEN_GAIN),
+            nn.ReLU(),
+            orthogonal(nn.Conv2d(32, 64, 4, stride=2), HIDDEN_GAIN),
+            nn.ReLU(),
+            orthogonal(nn.Conv2d(64, 64, 3, stride=1), HIDDEN_GAIN),
+            nn.ReLU(),
+            nn.Flatten(),
+        )
+        side = [height, width]
+        for kernel, stride in ((8, 4), (4, 2), (3, 1)):
+            side = [(s - kernel) // stride + 1 for s in side]
+        if min(side) < 1:
+            raise ValueError(f"image {height}x{width} is too small for the Nature CNN (at least 36x36)")
+        self.output_size = 64 * side[0] * side[1]
+
+    def forward(self, images: Tensor) -> Tensor:
+        if images.dtype != torch.uint8:
+            raise TypeError(f"the CNN takes uint8 images (0..255), got {images.dtype}")
+        # The only place where pixels become [0, 1] floats. HWC -> CHW is a view (channels-last strides, which
+        # oneDNN convolutions prefer); under autocast or with bfloat16 weights the pixels go straight to bfloat16.
+        pixels = images.permute(0, 3, 1, 2).to(compute_dtype(self.convs[0].weight)).mul_(1.0 / 255.0)
+        return self.convs(pixels)
+
+
+class NoMemory(nn.Module):
+    """The memory-less model: features pass straight through, the state is empty."""
+
+    def __init__(self, input_size: int) -> None:
+        super().__init__()
+        self.output_size = input_size
+        self.state_shape: tuple[int, ...] = (0,)
+
+    def initial_state(self, batch: int, device: torch.device | str) -> Tensor:
+        return torch.zeros((batch, *self.state_shape), device=device)
+
+    def step(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
+        return features, state
+
+    def sequences(self, features: Tensor, start_state: Tensor, mask: Tensor) -> Tensor:
+        return features
+
+
+class RecurrentMemory(nn.Module):
+    """A GRU or LSTM whose state is one tensor per environment: (layers, H) or, for the LSTM, (2, layers, H)."""
+
+    def __init__(self, kind: str, input_size: int, hidden_size: int, layers: int) -> None:
+        super().__init__()
+        rnn_class = {"gru": nn.GRU, "lstm": nn.LSTM}[kind]
+        self.rnn = orthogonal(rnn_class(input_size, hidden_size, layers, batch_first=True), HIDDEN_GAIN)
+        self.kind = kind
+        self.output_size = hidden_size
+        self.state_shape = (layers, hidden_size) if kind == "gru" else (2, layers, hidden_size)
+
+    def initial_state(self, batch: int, device: torch.device | str) -> Tensor:
+        return torch.zeros((batch, *self.state_shape), device=device)
+
+    def step(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
+        """One step of ``B`` environments: features (B, F), state (B, *state_shape)."""
+        output, final = self.rnn(features.unsqueeze(1), self._to_rnn(state.to(features.dtype)))
+        return output.squeeze(1), self._from_rnn(final)
+
+    def sequences(self, features: Tensor, start_state: Tensor, mask: Tensor) -> Tensor:
+        """Run whole sequences: ``features`` (N, F) are the real steps in sequence order, ``mask`` (S, P) marks
+        which of the P positions of each of the S sequences are real (a prefix), ``start_state`` (S, ...) is the
+        state the policy had at each sequence start. Returns the outputs of the N real steps, in the same order.
+
+        The recurrence runs on the packed layout (at time t, only the sequences still running), so padding costs
+        nothing and cannot change any output: what the zero-padded (S, P) layout computes, minus the padding.
+        """
+        order = torch.argsort(mask.sum(dim=1), descending=True, stable=True)  # packing wants the longest first
+        row = torch.zeros(mask.shape, dtype=torch.int64, device=mask.device)
+        row[mask] = torch.arange(features.shape[0], device=mask.device)  # where each real step sits in `features`
+        sorted_mask = mask[order]
+        time_major = row[order].T[sorted_mask.T]  # packed order: step t of every sequence longer than t
+        batch_sizes = sorted_mask.sum(dim=0).cpu()
+        packed = PackedSequence(features[time_major], batch_sizes[batch_sizes > 0], order, torch.argsort(order))
+        output, _ = self.rnn(packed, self._to_rnn(start_state.to(features.dtype)))
+        result = torch.empty_like(output.data)
+        result[time_major] = output.data
+        return result
+
+    def _to_rnn(self, state: Tensor) -> Tensor | tuple[Tensor, Tensor]:
+        if self.kind == "gru":
+            return state.transpose(0, 1).contiguous()
+        return state[:, 0].transpose(0, 1).contiguous(), state[:, 1].transpose(0, 1).contiguous()
+
+    def _from_rnn(self, state: Tensor | tuple[Tensor, Tensor]) -> Tensor:
+        if self.kind == "gru":
+            return state.transpose(0, 1)
+        hidden, cell = state
+        return torch.stack((hidden.transpose(0, 1), cell.transpose(0, 1)), dim=1)
+
+
+def make_memory(config: ModelConfig, input_size: int) -> NoMemory | RecurrentMemory:
+    if config.memory == "none":
+        return NoMemory(input_size)
+    if config.memory in ("gru", "lstm"):
+        return RecurrentMemory(config.memory, input_size, config.memory_size, config.memory_layers)
+    raise ValueError(f"model.memory={config.memory!r} is invalid; valid choices: {', '.join(MEMORY_KINDS)}")
+
+
+class ActorCritic(nn.Module):
+    """Shared trunk (encoders, memory, body) with separate policy and value streams."""
+
+    def __init__(self, observation_space: gym.Space, action_space: gym.Space, config: ModelConfig) -> None:
+        super().__init__()
+        self.action_dims = action_branches(action_space)
+        self.inputs = model_inputs(observation_space, action_space, config)
+        self.image_encoder = NatureCNN(self.inputs["image"].shape)  # type: ignore[arg-type]
+        vector_size = self.inputs["vector"].shape[0] if "vector" in self.inputs else 0
+        vector_size += sum(self.action_dims) if config.previous_action else 0
+        vector_size += 1 if config.previous_reward else 0
+        self.vector_encoder = None
+        feature_size = self.image_encoder.output_size
+        if vector_size:
+            self.vector_encoder = nn.Sequential(
+                orthogonal(nn.Linear(vector_size, config.vector_encoder_size), HIDDEN_GAIN), nn.ReLU()
+            )
+            feature_size += config.vector_encoder_size
+        self.memory = make_memory(config, feature_size)
+        hidden = config.hidden_size
+        self.body = nn.Sequential(orthogonal(nn.Linear(self.memory.output_size, hidden), HIDDEN_GAIN), nn.ReLU())
+        self.policy_stream = nn.Sequential(orthogonal(nn.Linear(hidden, hidden), HIDDEN_GAIN), nn.ReLU())
+        self.value_stream = nn.Sequential(orthogonal(nn.Linear(hidden, hidden), HIDDEN_GAIN), nn.ReLU())
+        self.policy_heads = nn.ModuleList(orthogonal(nn.Linear(hidden, n), POLICY_GAIN) for n in self.action_dims)
+        self.value_head = orthogonal(nn.Linear(hidden, 1), VALUE_GAIN)
+
+    @property
+    def state_shape(self) -> tuple[int, ...]:
+        return self.memory.state_shape
+
+    def initial_state(self, batch: int, device: torch.device | str) -> Tensor:
+        """The memory state at the start of an episode (zeros), for ``batch`` environments."""
+        return self.memory.initial_state(batch, device)
+
+    def encode(self, inputs: dict[str, Tensor]) -> Tensor:
+        """Features (N, F) of a flat batch of steps."""
+        features = [self.image_encoder(inputs["image"])]
+        if self.vector_encoder is not None:
+            dtype = compute_dtype(self.vector_encoder[0].weight)
+            vector = []
+            if "vector" in inputs:
+                vector.append(inputs["vector"].to(dtype))
+            if "previous_action" in inputs:
+                one_hots = [F.one_hot(inputs["previous_action"][:, i], n) for i, n in enumerate(self.action_dims)]
+                vector.extend(one_hot.to(dtype) for one_hot in one_hots)
+            if "previous_reward" in inputs:
+                vector.append(inputs["previous_reward"].unsqueeze(-1).to(dtype))
+            features.append(self.vector_encoder(torch.cat(vector, dim=-1)))
+        return torch.cat(features, dim=-1) if len(features) > 1 else features[0]
+
+    def heads(self, memory_output: Tensor) -> tuple[list[Tensor], Tensor]:
+        """Logits of every action branch (float32) and the value (N,) of a flat batch."""
+        hidden = self.body(memory_output)
+        policy, value = self.policy_stream(hidden), self.value_stream(hidden)
+        logits = [head(policy).float() for head in self.policy_heads]
+        return logits, self.value_head(value).squeeze(-1).float()
+
+    def step(self, inputs: dict[str, Tensor], state: Tensor) -> tuple[list[Tensor], Tensor, Tensor]:
+        """Rollout: one step of B environments. Returns logits, values (B,) and the next memory state."""
+        output, next_state = self.memory.step(self.encode(inputs), state)
+        logits, values = self.heads(output)
+        return logits, values, next_state
+
+    def evaluate(self, inputs: dict[str, Tensor], start_state: Tensor, mask: Tensor) -> tuple[list[Tensor], Tensor]:
+        """Training: the N real steps of S sequences (flat, in sequence order), their start states (S, ...) and
+        their padding mask (S, P). Returns logits and values of the N steps."""
+        output = self.memory.sequences(self.encode(inputs), start_state, mask)
+        return self.heads(output)
+
+
+# --------------------------------------------------------------------------------------- action distribution
+def sample_actions(logits: Sequence[Tensor], generator: torch.Generator) -> tuple[Tensor, Tensor]:
+    """Sample one action per branch; returns actions (B, branches) int64 and their log-probs (B, branches)."""
+    actions, log_probs = [], []
+    for branch_logits in logits:
+        log_p = F.log_softmax(branch_logits, dim=-1)
+        action = torch.multinomial(log_p.exp(), 1, generator=generator)
+        actions.append(action)
+        log_probs.append(log_p.gather(-1, action))
+    return torch.cat(actions, dim=-1), torch.cat(log_probs, dim=-1)
+
+
+def log_probs_and_entropy(logits: Sequence[Tensor], actions: Tensor) -> tuple[Tensor, Tensor]:
+    """Log-probs (N, branches) of ``actions`` and the entropy (N,) summed over branches."""
+    log_probs, entropy = [], 0.0
+    for i, branch_logits in enumerate(logits):
+        log_p = F.log_softmax(branch_logits, dim=-1)
+        log_probs.append(log_p.gather(-1, actions[:, i : i + 1]))
+        entropy = entropy - (log_p.exp() * log_p).sum(-1)
+    return torch.cat(log_probs, dim=-1), entropy  # type: ignore[return-value]

@@ -1,0 +1,162 @@
+"""Config loading: strict keys with suggestions, typed and ranged values, overrides, schedules, shipped configs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+import envs
+from agents.config import Config, ConfigError, Schedule, config_from_dict, config_to_dict, dump_config, load_config
+
+CONFIGS = sorted((Path(__file__).resolve().parent.parent / "configs").rglob("*.yaml"))
+
+
+def test_defaults_are_table_6() -> None:
+    ppo, run, model = Config().ppo, Config().run, Config().model
+    assert (run.workers, run.worker_steps, run.total_steps) == (32, 512, 163_840_000)
+    assert (ppo.epochs, ppo.minibatches, ppo.gamma, ppo.gae_lambda) == (3, 8, 0.99, 0.95)
+    assert (ppo.value_coef, ppo.max_grad_norm, ppo.clip_range.value(5, 10)) == (0.25, 0.5, 0.2)
+    assert (ppo.learning_rate.initial, ppo.learning_rate.final) == (3e-4, 1e-4)
+    assert (ppo.entropy_coef.initial, ppo.entropy_coef.final) == (1e-4, 1e-5)
+    assert ppo.sequence_length == "max" and model.memory == "gru" and model.memory_size == 512
+    assert Config().env.train_seeds == [0, 99_999]
+
+
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [
+        ({"ppo": {"gama": 0.9}}, "unknown config key 'ppo.gama' (did you mean 'ppo.gamma'?)"),
+        ({"modle": {}}, "unknown config key 'modle' (did you mean 'model'?)"),
+        ({"ppo": {"learning_rate": {"inital": 1}}}, "did you mean 'ppo.learning_rate.initial'?"),
+        ({"env": {"options": {"dely": 3}}}, "did you mean 'delay'?"),
+        ({"env": {"id": "ProofOfMemory-v1"}}, "did you mean 'ProofOfMemory-v0'?"),
+        (
+            {"model": {"memory": "gur"}},
+            "model.memory='gur' is invalid (did you mean 'gru'?); valid choices: none, gru, lstm",
+        ),
+    ],
+)
+def test_unknown_names_suggest_the_closest_valid_one(raw: dict, message: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        config_from_dict(raw)
+    assert message in str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("raw", "message"),
+    [
+        ({"ppo": {"gamma": 1.5}}, "ppo.gamma=1.5 is invalid: expected a number in [0, 1]"),
+        ({"ppo": {"gamma": float("nan")}}, "ppo.gamma=nan is invalid"),
+        ({"ppo": {"epochs": 0}}, "ppo.epochs=0 is invalid: expected an int in [1, inf]"),
+        ({"ppo": {"epochs": 2.5}}, "ppo.epochs=2.5 is invalid: expected an int"),
+        ({"ppo": {"epochs": True}}, "ppo.epochs=True is invalid"),
+        ({"ppo": {"clip_value_loss": "yes"}}, "expected true or false"),
+        ({"ppo": {"sequence_length": 0}}, "ppo.sequence_length=0 is invalid: expected an int >= 1 or 'max'"),
+        ({"ppo": {"sequence_length": "longest"}}, "expected an int >= 1 or 'max'"),
+        ({"ppo": {"advantage_normalization": "batches"}}, "did you mean 'batch'?"),
+        ({"ppo": {"learning_rate": -1.0}}, "ppo.learning_rate.initial=-1.0 is invalid: expected a number in [0, inf]"),
+        ({"run": {"device": "gpu"}}, "run.device='gpu' is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'"),
+        ({"run": {"precision": "fp16"}}, "valid choices: fp32, bf16"),
+        ({"run": {"workers": 4, "worker_steps": 8, "total_steps": 16}}, "run.total_steps=16 is smaller than one batch"),
+        ({"env": {"options": {"delay": 0}}}, "option 'delay'=0 is invalid"),
+        ({"env": {"train_seeds": [5, 1]}}, "env.train_seeds=[5, 1] is invalid"),
+        ({"model": {"memory": "none"}, "ppo": {"sequence_length": 8}}, "needs a memory module"),
+        ({"grid": {"ppo.gamma": [0.9, 2.0]}}, "ppo.gamma=2.0 is invalid"),
+        ({"grid": {"ppo.gamma": 0.9}}, "grid.ppo.gamma=0.9 is invalid: expected a non-empty list"),
+        ({"grid": {"ppo.gamam": [0.9]}}, "did you mean 'ppo.gamma'?"),
+        ({"ppo": 3}, "ppo must be a mapping"),
+    ],
+)
+def test_bad_values_name_the_key_and_the_valid_range(raw: dict, message: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        config_from_dict(raw)
+    assert message in str(err.value)
+
+
+def test_overrides_are_parsed_as_yaml_and_validated() -> None:
+    config = config_from_dict(
+        {"ppo": {"learning_rate": 1.0e-3}},
+        [
+            "ppo.gamma=0.995",
+            "ppo.sequence_length=16",
+            "model.memory=lstm",
+            "env.options.delay=8",
+            "env.train_seeds=[10, 20]",
+            "ppo.learning_rate.final=1e-5",  # YAML 1.1 reads 1e-5 as a string; float fields accept it
+            "run.progress_bar=false",
+        ],
+    )
+    assert config.ppo.gamma == 0.995 and config.ppo.sequence_length == 16 and config.model.memory == "lstm"
+    assert config.env.options == {"delay": 8} and config.env.train_seeds == [10, 20]
+    assert config.ppo.learning_rate == Schedule(1.0e-3, 1e-5, None)  # the constant became the initial value
+    assert config.run.progress_bar is False
+    for bad, message in [
+        ("ppo.gamm=1", "did you mean 'ppo.gamma'?"),
+        ("ppo.gamma.x=1", "'ppo.gamma' is a float, it has no sub-keys"),
+        ("gamma", "expected KEY=VALUE"),
+        ("ppo.epochs=three", "ppo.epochs='three' is invalid"),
+    ]:
+        with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace("?", r"\?")):
+            config_from_dict({}, [bad])
+
+
+def test_partial_blocks_keep_the_field_defaults() -> None:
+    config = config_from_dict({"ppo": {"learning_rate": {"final": 0.0}}, "run": {"seed": 3}})
+    assert config.ppo.learning_rate == Schedule(3e-4, 0.0, None)
+    assert config.run.seed == 3 and config.run.workers == 32
+
+
+def test_linear_schedule() -> None:
+    schedule = Schedule(1.0, 0.0)
+    assert [schedule.value(u, 4) for u in range(4)] == [1.0, 0.75, 0.5, 0.25]
+    assert Schedule(1.0, 0.5, decay_updates=2).value(5, 10) == 0.5  # holds the final value after the decay
+    assert Schedule(0.3).value(7, 10) == 0.3
+
+
+def test_dump_and_reload_round_trip(tmp_path: Path) -> None:
+    config = config_from_dict({}, ["ppo.sequence_length=8", "env.options.delay=6", "ppo.entropy_coef=0.01"])
+    path = tmp_path / "config.yaml"
+    path.write_text(dump_config(config))
+    assert load_config(path) == config
+    assert config_to_dict(load_config(path)) == yaml.safe_load(path.read_text())
+
+
+def test_missing_file_and_non_mapping(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_config(tmp_path / "nope.yaml")
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="expected a mapping"):
+        load_config(tmp_path / "list.yaml")
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=[str(p.relative_to(p.parents[1])) for p in CONFIGS])
+def test_shipped_configs_load(path: Path) -> None:
+    env_id = (yaml.safe_load(path.read_text()).get("env") or {}).get("id", "ProofOfMemory-v0")
+    if env_id not in envs.ENV_IDS:
+        pytest.skip(f"{env_id} is not implemented on this branch yet")
+    config = load_config(path)
+    assert config.num_updates >= 1
+
+
+def test_mortar_mayhem_b_grid_configs_are_table_6() -> None:
+    root = Path(__file__).resolve().parent.parent / "configs" / "mortar_mayhem_b_grid"
+    for name, memory in (("gru", "gru"), ("ppo", "none")):
+        raw = yaml.safe_load((root / f"{name}.yaml").read_text())
+        assert raw["env"]["id"] == "MortarMayhemB-Grid-v0"
+        config = config_from_dict({**raw, "env": {}})  # validated without needing the env to be registered
+        assert config.model.memory == memory
+        assert (config.run.workers, config.run.worker_steps, config.run.total_steps) == (32, 512, 163_840_000)
+        assert (config.ppo.epochs, config.ppo.minibatches, config.ppo.gamma, config.ppo.gae_lambda) == (
+            3,
+            8,
+            0.99,
+            0.95,
+        )
+        assert (config.ppo.value_coef, config.ppo.max_grad_norm, config.ppo.clip_range) == (0.25, 0.5, Schedule(0.2))
+        assert config.ppo.learning_rate == Schedule(3e-4, 1e-4) and config.ppo.entropy_coef == Schedule(1e-4, 1e-5)
+        assert config.model.previous_action and config.model.previous_reward
+        assert config.model.hidden_size == 512
+        if memory == "gru":
+            assert config.model.memory_size == 512 and config.ppo.sequence_length == "max"

@@ -1,0 +1,171 @@
+"""The actor-critic: input layout, initialisation, the memory modules and padding invariance."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from agents.config import ModelConfig
+from agents.models import ActorCritic, NatureCNN, log_probs_and_entropy, model_inputs, sample_actions
+from agents.sequences import pad_sequences, split_sequences
+
+IMAGE = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
+DICT = gym.spaces.Dict({"visual_observation": IMAGE, "vector_observation": gym.spaces.Box(-1.0, 1.0, (5,), np.float32)})
+MULTI = gym.spaces.MultiDiscrete([3, 3])
+
+
+def _model(memory: str, observation_space: gym.Space = DICT, action_space: gym.Space = MULTI, **kw) -> ActorCritic:
+    torch.manual_seed(0)
+    config = ModelConfig(memory=memory, memory_size=16, hidden_size=24, vector_encoder_size=8, **kw)
+    return ActorCritic(observation_space, action_space, config)
+
+
+def _inputs(model: ActorCritic, n: int, seed: int = 0) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    out = {}
+    for name, field in model.inputs.items():
+        if field.dtype == torch.uint8:
+            out[name] = torch.randint(0, 256, (n, *field.shape), generator=g, dtype=torch.uint8)
+        elif field.dtype == torch.int64:
+            out[name] = torch.randint(0, 3, (n, *field.shape), generator=g)
+        else:
+            out[name] = torch.randn((n, *field.shape), generator=g)
+    return out
+
+
+def test_inputs_follow_the_spaces_and_the_config() -> None:
+    config = ModelConfig(previous_action=True, previous_reward=True)
+    fields = model_inputs(DICT, MULTI, config)
+    assert {k: (v.shape, v.dtype) for k, v in fields.items()} == {
+        "image": ((36, 36, 3), torch.uint8),
+        "vector": ((5,), torch.float32),
+        "previous_action": ((2,), torch.int64),
+        "previous_reward": ((), torch.float32),
+    }
+    assert list(model_inputs(IMAGE, gym.spaces.Discrete(2), ModelConfig())) == ["image"]
+    with pytest.raises(ValueError, match="uint8 Box"):
+        model_inputs(gym.spaces.Box(0.0, 1.0, (36, 36, 3), np.float32), MULTI, config)
+    with pytest.raises(ValueError, match="Dict observation keys"):
+        model_inputs(gym.spaces.Dict({"image": IMAGE}), MULTI, config)
+    with pytest.raises(ValueError, match="action space"):
+        ActorCritic(IMAGE, gym.spaces.Box(-1, 1, (2,)), config)
+
+
+@pytest.mark.parametrize("memory", ["none", "gru", "lstm"])
+def test_output_shapes(memory: str) -> None:
+    model = _model(memory, previous_action=True, previous_reward=True)
+    state = model.initial_state(5, "cpu")
+    assert state.shape == {"none": (5, 0), "gru": (5, 1, 16), "lstm": (5, 2, 1, 16)}[memory]
+    logits, values, next_state = model.step(_inputs(model, 5), state)
+    assert [tuple(x.shape) for x in logits] == [(5, 3), (5, 3)] and values.shape == (5,)
+    assert next_state.shape == state.shape
+    actions, log_probs = sample_actions(logits, torch.Generator().manual_seed(0))
+    assert actions.shape == (5, 2) and actions.dtype == torch.int64 and log_probs.shape == (5, 2)
+    again, entropy = log_probs_and_entropy(logits, actions)
+    torch.testing.assert_close(again, log_probs)
+    assert entropy.shape == (5,) and (entropy <= 2 * math.log(3) + 1e-6).all()
+
+
+def test_initialisation_gains() -> None:
+    model = _model("gru", IMAGE, gym.spaces.Discrete(4))
+
+    def gram(w: torch.Tensor) -> torch.Tensor:  # W W^T for wide matrices, W^T W for tall ones
+        w = w.detach().reshape(w.shape[0], -1)
+        return w @ w.T if w.shape[0] <= w.shape[1] else w.T @ w
+
+    def assert_orthogonal(w: torch.Tensor, gain: float) -> None:
+        g = gram(w)
+        torch.testing.assert_close(g, gain**2 * torch.eye(g.shape[0]), atol=1e-5, rtol=1e-5)
+
+    assert_orthogonal(model.policy_heads[0].weight, 0.1)
+    assert_orthogonal(model.value_head.weight, 1.0)
+    for layer in (model.body[0], model.policy_stream[0], model.value_stream[0], model.image_encoder.convs[0]):
+        assert_orthogonal(layer.weight, math.sqrt(2))
+    assert_orthogonal(model.memory.rnn.weight_hh_l0, math.sqrt(2))
+    assert_orthogonal(model.memory.rnn.weight_ih_l0, math.sqrt(2))
+    for name, param in model.named_parameters():
+        if name.endswith("bias") or "bias_" in name:
+            assert not param.any(), name
+
+
+def test_pixels_are_scaled_once_and_must_be_uint8() -> None:
+    cnn = NatureCNN((36, 36, 3))
+    white = torch.full((2, 36, 36, 3), 255, dtype=torch.uint8)
+    expected = cnn.convs(torch.ones(2, 3, 36, 36))
+    torch.testing.assert_close(cnn(white), expected)
+    with pytest.raises(TypeError, match="uint8"):
+        cnn(white.float())
+    with pytest.raises(ValueError, match="too small"):
+        NatureCNN((32, 32, 3))
+    assert NatureCNN((84, 84, 3)).output_size == 64 * 7 * 7
+
+
+def _episode_layout() -> tuple[np.ndarray, int, int]:
+    # 3 workers x 7 steps; episodes of several lengths, some crossing the rollout's start and end
+    terminated = np.zeros((3, 7), dtype=bool)
+    terminated[0, [1, 5]] = True
+    terminated[2, 3] = True
+    return terminated, 3, 7
+
+
+@pytest.mark.parametrize("memory", ["gru", "lstm"])
+@pytest.mark.parametrize("max_length", [None, 2])
+def test_sequences_reproduce_step_by_step_outputs(memory: str, max_length: int | None) -> None:
+    """Training on padded sequences from stored start states gives what the rollout computed one step at a time."""
+    model = _model(memory, previous_action=True)
+    terminated, workers, steps = _episode_layout()
+    inputs = _inputs(model, workers * steps, seed=1)
+    step_inputs = {k: v.reshape(workers, steps, *v.shape[1:]) for k, v in inputs.items()}
+    state = torch.randn(model.initial_state(workers, "cpu").shape, generator=torch.Generator().manual_seed(2))
+    states, values, logits0 = [], [], []
+    with torch.no_grad():
+        for t in range(steps):
+            states.append(state)
+            logits, value, state = model.step({k: v[:, t] for k, v in step_inputs.items()}, state)
+            values.append(value)
+            logits0.append(logits[0])
+            state = state * torch.from_numpy(~terminated[:, t]).view(-1, *[1] * (state.dim() - 1))
+    flat_states = torch.stack(states, dim=1).reshape(workers * steps, *state.shape[1:])
+    flat_values = torch.stack(values, dim=1).reshape(-1)
+    flat_logits = torch.stack(logits0, dim=1).reshape(workers * steps, -1)
+
+    sequences = split_sequences(terminated, max_length)
+    batch = pad_sequences(sequences, np.random.default_rng(0).permutation(len(sequences)))
+    with torch.no_grad():
+        logits, values = model.evaluate(
+            {k: v[batch.step_index] for k, v in inputs.items()}, flat_states[batch.start_index], batch.mask
+        )
+    torch.testing.assert_close(values, flat_values[batch.step_index], atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(logits[0], flat_logits[batch.step_index], atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("memory", ["none", "gru", "lstm"])
+def test_padding_changes_no_output_and_no_gradient(memory: str) -> None:
+    model = _model(memory, previous_action=True, previous_reward=True)
+    terminated, workers, steps = _episode_layout()
+    sequences = split_sequences(terminated, None if memory != "none" else 1)
+    inputs = _inputs(model, workers * steps, seed=3)
+    states = torch.randn(workers * steps, *model.state_shape, generator=torch.Generator().manual_seed(4))
+    ids = np.arange(len(sequences))
+
+    def loss_and_grads(pad_to: int | None) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        batch = pad_sequences(sequences, ids, pad_to=pad_to)
+        model.zero_grad()
+        logits, values = model.evaluate(
+            {k: v[batch.step_index] for k, v in inputs.items()}, states[batch.start_index], batch.mask
+        )
+        loss = values.square().mean() + sum(x.logsumexp(-1).mean() for x in logits)
+        loss.backward()
+        return loss.detach(), [p.grad.clone() for p in model.parameters()]
+
+    loss, grads = loss_and_grads(None)
+    longest = int(sequences.lengths.max())
+    for extra in (1, 9):
+        padded_loss, padded_grads = loss_and_grads(longest + extra)
+        torch.testing.assert_close(padded_loss, loss, atol=1e-6, rtol=1e-6)
+        for a, b in zip(padded_grads, grads, strict=True):
+            torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
