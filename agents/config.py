@@ -23,7 +23,7 @@ import types
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
+from typing import Any, Union, get_args, get_origin, get_type_hints
 
 import yaml
 
@@ -86,7 +86,9 @@ class ModelConfig:
     memory_size: int = param(512, "hidden units of the recurrent layer", low=1)
     memory_layers: int = param(1, "stacked recurrent layers", low=1)
     hidden_size: int = param(512, "units of the body layer and of each of the policy and value streams", low=1)
-    vector_encoder_size: int = param(128, "units of the encoder of vector inputs (vector obs, previous action/reward)")
+    vector_encoder_size: int = param(
+        128, "units of the encoder of vector inputs (vector obs, previous action/reward)", low=1
+    )
     previous_action: bool = param(False, "feed the previous action (one-hot per branch, zeros at reset)")
     previous_reward: bool = param(False, "feed the previous reward (zero at reset)")
 
@@ -119,7 +121,7 @@ class RunConfig:
     workers: int = param(32, "environments stepped in parallel (slots of one batched core)", low=1)
     worker_steps: int = param(512, "steps per worker per rollout", low=1)
     device: str = param("cpu", "torch device: 'cpu' or 'cuda' (or 'cuda:N')")
-    precision: str = param("fp32", "'fp32', or 'bf16': autocast (convolutions, matmuls, GRU in bfloat16)")
+    precision: str = param("fp32", "'fp32', or 'bf16': train under bfloat16 autocast, act with bfloat16 weights")
     torch_threads: int = param(0, "torch intra-op threads (0: one per CPU core)", low=0)
     seed: int = param(0, "seed of the model init, action sampling, minibatch shuffling and episode seeds", low=0)
     checkpoint_interval: int = param(100, "updates between checkpoints (0: only at the end)", low=0)
@@ -207,29 +209,24 @@ def _deep_copy(raw: Any) -> Any:
 def _set_dotted(tree: dict, key: str, value: Any) -> None:
     """Set ``tree[a][b] = value`` for ``key = "a.b"``, checking each part against the dataclass fields."""
     parts = key.split(".")
-    cls: Any = Config
+    cls: Any = Config  # None inside a free-form mapping (env.options), where any key is allowed
     node = tree
     for depth, part in enumerate(parts):
         here = ".".join(parts[: depth + 1])
-        if cls is None:  # inside a free-form mapping (env.options): any key is allowed here
-            pass
-        else:
-            names = [f.name for f in dataclasses.fields(cls)]
-            if part not in names:
-                raise ConfigError(_unknown_key_message(here, part, names))
-        last = depth == len(parts) - 1
-        if last:
+        if cls is not None and part not in (names := [f.name for f in dataclasses.fields(cls)]):
+            raise ConfigError(_unknown_key_message(here, part, names))
+        if depth == len(parts) - 1:
             node[part] = value
             return
-        child_type = _field_type(cls, part) if cls is not None else None
-        if cls is not None and not (_is_dataclass_type(child_type) or _is_mapping_type(child_type)):
-            raise ConfigError(f"key {key!r}: {here!r} is a {_type_name(child_type)}, it has no sub-keys")
-        if child_type is Schedule and _is_number(node.get(part)):
+        child = get_type_hints(cls)[part] if cls is not None else None
+        if cls is not None and not (_is_dataclass_type(child) or get_origin(child) is dict):
+            raise ConfigError(f"key {key!r}: {here!r} is a {getattr(child, '__name__', child)}, it has no sub-keys")
+        if child is Schedule and _is_number(node.get(part)):
             node[part] = _constant_schedule(node[part])
         elif not isinstance(node.get(part), dict):
             node[part] = {}
         node = node[part]
-        cls = child_type if _is_dataclass_type(child_type) else None
+        cls = child if _is_dataclass_type(child) else None
 
 
 def _constant_schedule(value: float) -> dict:
@@ -277,10 +274,6 @@ def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any]) -> Any:
                 errors.append(str(err))
         expected = meta.get("expect") or _describe(tp)
         raise ConfigError(errors[0] if len(errors) == 1 else f"{key}={value!r} is invalid: expected {expected}")
-    if origin is Literal:
-        if value not in args:
-            raise ConfigError(f"{key}={value!r} is invalid; valid choices: {', '.join(map(repr, args))}")
-        return value
     if tp is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"{key}={value!r} is invalid: expected true or false")
@@ -411,19 +404,7 @@ def _is_dataclass_type(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
 
-def _is_mapping_type(tp: Any) -> bool:
-    return get_origin(tp) is dict
-
-
-def _field_type(cls: type, name: str) -> Any:
-    return get_type_hints(cls)[name]
-
-
-def _type_name(tp: Any) -> str:
-    return getattr(tp, "__name__", str(tp))
-
-
 def _describe(tp: Any) -> str:
     args = [a for a in get_args(tp) if a is not type(None)]
     names = {int: "an int", float: "a number", str: "a string", bool: "true or false"}
-    return " or ".join(names.get(a, _type_name(a)) for a in args)
+    return " or ".join(names.get(a, getattr(a, "__name__", str(a))) for a in args)
