@@ -79,7 +79,7 @@ def test_make_core_rejects_unknown_ids_and_bad_sizes() -> None:
 
 
 def test_bad_render_mode_and_autoreset_mode_are_named() -> None:
-    with pytest.raises(ValueError, match="render_mode='rgb'.*valid render modes"):
+    with pytest.warns(UserWarning, match="render_mode"), pytest.raises(ValueError, match="render_mode='rgb'.*valid"):
         gym.make("ProofOfMemory-v0", render_mode="rgb")
     with pytest.raises(ValueError, match="autoreset_mode='later'"):
         gym.make_vec("ProofOfMemory-v0", num_envs=2, autoreset_mode="later")
