@@ -8,7 +8,7 @@ import pytest
 
 import envs
 from envs.mystery_path import TILE, MysteryPathCore
-from tests.parity import jsonable, values_equal
+from tests.batching import check_batched_equals_singles
 
 IDS = ["MysteryPath-v0", "MysteryPath-Grid-v0", "Endless-MysteryPath-v0"]
 RED = np.array([255, 0, 0], dtype=np.uint8)
@@ -442,32 +442,12 @@ def _actions(space: gym.Space, rng: np.random.Generator, cores: list[MysteryPath
 @pytest.mark.parametrize("env_id", IDS)
 def test_batched_slots_equal_single_environments(env_id: str) -> None:
     """A 6-slot core (stepped all at once, or a few live slots at a time) equals six 1-slot cores."""
-    n = 6
-    options = OPTIONS[env_id]
-    batched = envs.make_core(env_id, num_envs=n)
-    singles = [envs.make_core(env_id) for _ in range(n)]
-    for k in range(n):
-        batched.reset_slot(k, seed=100 + k, options=options[k % len(options)])
-        singles[k].reset_slot(0, seed=100 + k, options=options[k % len(options)])
-    rng = np.random.default_rng(0)
-    episodes = 0
-    for t in range(300):
-        actions = _actions(batched.single_action_space, rng, singles)
-        live = np.arange(n) if t % 5 else rng.permutation(n)[: rng.integers(1, n)]  # also a few slots at a time
-        rewards, terminated, finals = batched.step(actions[live], idx=live)
-        for i, k in enumerate(live.tolist()):
-            r, term, final = singles[k].step(actions[k : k + 1])
-            assert rewards[i] == r[0] and terminated[i] == term[0], (t, k)
-            assert values_equal(jsonable(finals.get(k, {})), jsonable(final.get(0, {})))
-            assert values_equal(jsonable(batched.step_info(k)), jsonable(singles[k].step_info(0)))
-            if term[0]:
-                episodes += 1
-                batched.reset_slot(k, options=options[k % len(options)])  # the generator continues
-                singles[k].reset_slot(0, options=options[k % len(options)])
-        np.testing.assert_array_equal(batched.observations(), np.stack([s.observations()[0] for s in singles]))
-        if t % 25 == 0:
-            for k in range(n):
-                np.testing.assert_array_equal(batched.debug_frame(k), singles[k].debug_frame(0))
+    singles, episodes = check_batched_equals_singles(
+        env_id,
+        OPTIONS[env_id],
+        300,
+        lambda rng, singles: _actions(singles[0].single_action_space, rng, singles),
+    )
     assert episodes >= 3
     if env_id.startswith("Endless"):
         assert max(int(s.num_segments[0]) for s in singles) > 3  # segments were generated during steps

@@ -24,7 +24,7 @@ from envs.searing_spotlights import (
     paint_hud_row,
     sample_position,
 )
-from tests.parity import jsonable, values_equal
+from tests.batching import check_batched_equals_singles
 
 IDS = ["SearingSpotlights-v0", "Endless-SearingSpotlights-v0"]
 NO_SPOTLIGHTS = {"initial_spawns": 0}  # plus "num_spawns": 0 for SearingSpotlights-v0
@@ -526,32 +526,7 @@ OPTIONS = {
 @pytest.mark.parametrize("env_id", IDS)
 def test_batched_slots_equal_single_environments(env_id: str) -> None:
     """A 6-slot core (all slots at once, or a few at a time) equals six 1-slot cores, frames and debug views."""
-    n = 6
-    options = OPTIONS[env_id]
-    batched = envs.make_core(env_id, num_envs=n)
-    singles = [envs.make_core(env_id) for _ in range(n)]
-    for k in range(n):
-        batched.reset_slot(k, seed=100 + k, options=options[k % len(options)])
-        singles[k].reset_slot(0, seed=100 + k, options=options[k % len(options)])
-    rng = np.random.default_rng(0)
-    episodes = 0
-    for t in range(250):
-        actions = rng.integers(0, 3, size=(n, 2))
-        live = np.arange(n) if t % 5 else np.sort(rng.permutation(n)[: rng.integers(1, n)])
-        rewards, terminated, finals = batched.step(actions[live], idx=live)
-        for i, k in enumerate(live.tolist()):
-            r, term, final = singles[k].step(actions[k : k + 1])
-            assert rewards[i] == r[0] and terminated[i] == term[0], (t, k)
-            assert values_equal(jsonable(finals.get(k, {})), jsonable(final.get(0, {})))
-            assert values_equal(jsonable(batched.step_info(k)), jsonable(singles[k].step_info(0)))
-            if term[0]:
-                episodes += 1
-                batched.reset_slot(k, options=options[k % len(options)])  # the generator continues
-                singles[k].reset_slot(0, options=options[k % len(options)])
-        np.testing.assert_array_equal(batched.observations(), np.stack([s.observations()[0] for s in singles]))
-        if t % 25 == 0:
-            for k in range(n):
-                np.testing.assert_array_equal(batched.debug_frame(k), singles[k].debug_frame(0))
+    _, episodes = check_batched_equals_singles(env_id, OPTIONS[env_id], 250, lambda rng, _: rng.integers(0, 3, (6, 2)))
     assert episodes >= 4
 
 

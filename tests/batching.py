@@ -1,0 +1,47 @@
+"""Shared check: one core with several slots (stepped all at once or a few at a time) equals one-slot cores."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+import envs
+from envs.core import BatchedCore
+from tests.parity import jsonable, values_equal
+
+ActionChooser = Callable[[np.random.Generator, list[BatchedCore]], np.ndarray]
+
+
+def check_batched_equals_singles(
+    env_id: str, options: Sequence[dict[str, Any] | None], steps: int, choose_actions: ActionChooser, n: int = 6
+) -> tuple[list[BatchedCore], int]:
+    """Step an ``n``-slot core and ``n`` one-slot cores side by side; assert identical rewards, flags, infos, frames
+    and debug views. Slot k uses ``options[k % len(options)]``; finished slots restart with continued generators.
+    Returns the one-slot cores and the number of finished episodes."""
+    batched = envs.make_core(env_id, num_envs=n)
+    singles = [envs.make_core(env_id) for _ in range(n)]
+    for k in range(n):
+        batched.reset_slot(k, seed=100 + k, options=options[k % len(options)])
+        singles[k].reset_slot(0, seed=100 + k, options=options[k % len(options)])
+    rng = np.random.default_rng(0)
+    episodes = 0
+    for t in range(steps):
+        actions = choose_actions(rng, singles)
+        live = np.arange(n) if t % 5 else np.sort(rng.permutation(n)[: rng.integers(1, n)])  # a few slots at a time
+        rewards, terminated, finals = batched.step(actions[live], idx=live)
+        for i, k in enumerate(live.tolist()):
+            r, term, final = singles[k].step(actions[k : k + 1])
+            assert rewards[i] == r[0] and terminated[i] == term[0], (t, k)
+            assert values_equal(jsonable(finals.get(k, {})), jsonable(final.get(0, {})))
+            assert values_equal(jsonable(batched.step_info(k)), jsonable(singles[k].step_info(0)))
+            if term[0]:
+                episodes += 1
+                batched.reset_slot(k, options=options[k % len(options)])  # the generator continues
+                singles[k].reset_slot(0, options=options[k % len(options)])
+        np.testing.assert_array_equal(batched.observations(), np.stack([s.observations()[0] for s in singles]))
+        if t % 25 == 0:
+            for k in range(n):
+                np.testing.assert_array_equal(batched.debug_frame(k), singles[k].debug_frame(0))
+    return singles, episodes
