@@ -45,3 +45,34 @@ def check_batched_equals_singles(
             for k in range(n):
                 np.testing.assert_array_equal(batched.debug_frame(k), singles[k].debug_frame(0))
     return singles, episodes
+
+
+def check_vector_env_matches_singles(
+    env_id: str, options: dict[str, Any], steps: int, choose_actions: ActionChooser, n: int = 3
+) -> int:
+    """``gymnasium.make_vec`` (next-step autoreset, generators continued) against ``n`` single envs reset without a
+    seed after each episode; asserts identical observations, rewards and flags. Returns the number of autoresets."""
+    import gymnasium as gym
+
+    vec = gym.make_vec(env_id, num_envs=n, options=options)
+    singles = [gym.make(env_id, disable_env_checker=True, options=options) for _ in range(n)]
+    obs, _ = vec.reset(seed=40)
+    for k, env in enumerate(singles):
+        np.testing.assert_array_equal(obs[k], env.reset(seed=40 + k)[0])
+    rng = np.random.default_rng(1)
+    restart, resets = [False] * n, 0
+    for _ in range(steps):
+        actions = choose_actions(rng, [env.unwrapped.core for env in singles])
+        obs, rewards, terminated, truncated, _ = vec.step(actions)
+        assert not truncated.any()
+        for k, env in enumerate(singles):
+            if restart[k]:  # this step reset slot k (its action is ignored)
+                single_obs, _ = env.reset()
+                assert rewards[k] == 0 and not terminated[k]
+                restart[k], resets = False, resets + 1
+            else:
+                single_obs, reward, single_terminated, _, _ = env.step(actions[k])
+                assert reward == rewards[k] and single_terminated == terminated[k]
+                restart[k] = single_terminated
+            np.testing.assert_array_equal(obs[k], single_obs)
+    return resets

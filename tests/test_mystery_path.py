@@ -8,7 +8,7 @@ import pytest
 
 import envs
 from envs.mystery_path import TILE, MysteryPathCore
-from tests.batching import check_batched_equals_singles
+from tests.batching import check_batched_equals_singles, check_vector_env_matches_singles
 
 IDS = ["MysteryPath-v0", "MysteryPath-Grid-v0", "Endless-MysteryPath-v0"]
 RED = np.array([255, 0, 0], dtype=np.uint8)
@@ -456,28 +456,9 @@ def test_batched_slots_equal_single_environments(env_id: str) -> None:
 @pytest.mark.parametrize("env_id", IDS)
 def test_vector_env_matches_single_envs(env_id: str) -> None:
     """gymnasium.make_vec (next-step autoreset, generators continued) equals single envs reset without a seed."""
-    options = {"max_steps": 25}
-    vec = gym.make_vec(env_id, num_envs=3, options=options)
-    singles = [make(env_id, options=options) for _ in range(3)]
-    obs, _ = vec.reset(seed=40)
-    for k, env in enumerate(singles):
-        np.testing.assert_array_equal(obs[k], env.reset(seed=40 + k)[0])
-    rng = np.random.default_rng(1)
-    restart, resets = [False] * 3, 0
-    for _ in range(70):
-        actions = _actions(vec.single_action_space, rng, [core_of(env) for env in singles])
-        obs, rewards, terminated, truncated, _ = vec.step(actions)
-        assert not truncated.any()
-        for k, env in enumerate(singles):
-            if restart[k]:  # this step reset slot k (its action is ignored)
-                single_obs, _ = env.reset()
-                assert rewards[k] == 0 and not terminated[k]
-                restart[k], resets = False, resets + 1
-            else:
-                single_obs, reward, single_terminated, _, _ = env.step(actions[k])
-                assert reward == rewards[k] and single_terminated == terminated[k]
-                restart[k] = single_terminated
-            np.testing.assert_array_equal(obs[k], single_obs)
+    resets = check_vector_env_matches_singles(
+        env_id, {"max_steps": 25}, 70, lambda rng, cores: _actions(cores[0].single_action_space, rng, cores)
+    )
     assert resets >= 3
 
 

@@ -24,7 +24,7 @@ from envs.searing_spotlights import (
     paint_hud_row,
     sample_position,
 )
-from tests.batching import check_batched_equals_singles
+from tests.batching import check_batched_equals_singles, check_vector_env_matches_singles
 
 IDS = ["SearingSpotlights-v0", "Endless-SearingSpotlights-v0"]
 NO_SPOTLIGHTS = {"initial_spawns": 0}  # plus "num_spawns": 0 for SearingSpotlights-v0
@@ -533,27 +533,9 @@ def test_batched_slots_equal_single_environments(env_id: str) -> None:
 @pytest.mark.parametrize("env_id", IDS)
 def test_vector_env_matches_single_envs(env_id: str) -> None:
     """gymnasium.make_vec (next-step autoreset, generators continued) equals single envs reset without a seed."""
-    options = {"max_steps": 30}
-    vec = gym.make_vec(env_id, num_envs=3, options=options)
-    singles = [make(env_id, options=options) for _ in range(3)]
-    obs, _ = vec.reset(seed=40)
-    for k, env in enumerate(singles):
-        np.testing.assert_array_equal(obs[k], env.reset(seed=40 + k)[0])
-    rng = np.random.default_rng(1)
-    restart, resets = [False] * 3, 0
-    for _ in range(80):
-        actions = rng.integers(0, 3, size=(3, 2))
-        obs, rewards, terminated, truncated, _ = vec.step(actions)
-        assert not truncated.any()
-        for k, env in enumerate(singles):
-            if restart[k]:
-                single_obs, _ = env.reset()
-                restart[k], resets = False, resets + 1
-            else:
-                single_obs, reward, single_terminated, _, _ = env.step(actions[k])
-                assert reward == rewards[k] and single_terminated == terminated[k]
-                restart[k] = single_terminated
-            np.testing.assert_array_equal(obs[k], single_obs)
+    resets = check_vector_env_matches_singles(
+        env_id, {"max_steps": 30}, 80, lambda rng, _: rng.integers(0, 3, size=(3, 2))
+    )
     assert resets >= 3
 
 
