@@ -91,8 +91,7 @@ class Trainer:
         self.previous_reward = torch.zeros(workers, device=self.device)
         self.episode_seeds = [0] * workers
         self.episode_actions: list[list[np.ndarray]] = [[] for _ in range(workers)]
-        for slot in range(workers):
-            self._start_episode(slot)
+        self._start_episodes(list(range(workers)))
         self.staging.load(self.core.observations())
         self.recent_returns: deque[float] = deque(maxlen=RECENT_EPISODES)
         self.history: list[dict[str, float]] = []
@@ -226,10 +225,11 @@ class Trainer:
                 self.previous_reward = rewards_t * alive
                 for slot in range(buffer.workers):
                     self.episode_actions[slot].append(actions_host[slot])
-                for slot, info in finals.items():
+                for info in finals.values():
                     finished.append(info)
                     self.recent_returns.append(info["reward"])
-                    self._start_episode(slot)
+                if finals:
+                    self._start_episodes(list(finals))
                 self.staging.load(self.core.observations())
         return finished
 
@@ -241,12 +241,14 @@ class Trainer:
             inputs["previous_reward"] = self.previous_reward
         return inputs
 
-    def _start_episode(self, slot: int) -> None:
+    def _start_episodes(self, slots: list[int]) -> None:
+        """New episodes in ``slots``, each with a seed drawn from the training range (one draw per slot, in order)."""
         low, high = self.config.env.train_seeds
-        seed = int(self.episode_seed_rng.integers(low, high + 1))
-        self.core.reset_slot(slot, seed)
-        self.episode_seeds[slot] = seed
-        self.episode_actions[slot] = []
+        seeds = [int(self.episode_seed_rng.integers(low, high + 1)) for _ in slots]
+        self.core.reset_slots(slots, seeds)
+        for slot, seed in zip(slots, seeds, strict=True):
+            self.episode_seeds[slot] = seed
+            self.episode_actions[slot] = []
 
     def _env_actions(self, actions: np.ndarray) -> np.ndarray:
         """(workers, branches) -> the env's layout: (workers,) for Discrete, (workers, branches) otherwise."""
@@ -357,8 +359,8 @@ class Trainer:
 
     def _replay_episodes(self, seeds: list[int], actions: list[np.ndarray]) -> None:
         """Reset every slot with its episode's seed and step it through the episode's actions (in lockstep)."""
+        self.core.reset_slots(range(len(seeds)), seeds)
         for slot, seed in enumerate(seeds):
-            self.core.reset_slot(slot, seed)
             self.episode_seeds[slot] = seed
             self.episode_actions[slot] = list(actions[slot])
         longest = max((len(a) for a in actions), default=0)

@@ -12,7 +12,8 @@ Two faces wrap one core: :class:`MemoryGymEnv` (``gymnasium.make``, one slot) an
 What a family implements (``idx`` is ``slice(None)`` for all slots or an int array of slot indices):
 
 * ``option_specs`` (dict of :class:`~envs.options.Option`), ``single_observation_space``, ``single_action_space``;
-* ``_reset_slot(k, rng, opts)``: build slot k's level with the reference's RNG calls and draw its first frame;
+* ``_reset_slot(k, rng, opts)``: build slot k's level with the reference's RNG calls and draw its first frame
+  (optionally ``_reset_slots(slots, rngs, opts)``, which builds several at once; by default it loops);
 * ``_step(idx, actions) -> (rewards, terminated)``: advance the slots ``idx`` and draw their frames;
 * ``_observation(idx)``: the observation arrays of the slots (views are fine, the faces copy);
 * ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here);
@@ -71,18 +72,39 @@ class BatchedCore:
 
     def reset_slot(self, k: int, seed: int | None = None, options: Mapping[str, Any] | None = None) -> None:
         """Start a new episode in slot ``k``. ``seed=None`` continues the slot's generator (OS entropy at first)."""
+        self.reset_slots([k], [seed], options)
+
+    def reset_slots(
+        self,
+        slots: Sequence[int] | np.ndarray,
+        seeds: Sequence[int | None] | None = None,
+        options: Mapping[str, Any] | None = None,
+    ) -> None:
+        """Start new episodes in several slots at once, with the same ``options``; ``seeds`` gives one seed (or
+        ``None``) per slot. The result equals :meth:`reset_slot` on each slot in turn, but a family may build the
+        levels together (its ``_reset_slots`` hook), which saves the per-slot overhead when many episodes end at once.
+        """
         opts = self.resolve(options)  # validate before touching any state
-        if seed is not None:
-            if not isinstance(seed, int | np.integer) or seed < 0:
+        slots = [int(k) for k in slots]
+        seeds = [None] * len(slots) if seeds is None else list(seeds)
+        if len(seeds) != len(slots):
+            raise ValueError(f"got {len(seeds)} seeds for {len(slots)} slots")
+        for seed in seeds:
+            if seed is not None and (not isinstance(seed, int | np.integer) or seed < 0):
                 raise ValueError(f"seed={seed!r} is invalid: expected a non-negative int or None")
-            self.rngs[k] = seeded_generator(int(seed))
-            self.seeds[k] = int(seed)
-        elif self.rngs[k] is None:
-            self.rngs[k] = np.random.default_rng()
-        self.slot_options[k] = opts
-        self.episode_return[k] = 0.0
-        self.episode_length[k] = 0
-        self._reset_slot(k, self.rngs[k], opts)
+        rngs = []
+        for k, seed in zip(slots, seeds, strict=True):
+            if seed is not None:
+                self.rngs[k] = seeded_generator(int(seed))
+                self.seeds[k] = int(seed)
+            elif self.rngs[k] is None:
+                self.rngs[k] = np.random.default_rng()
+            self.slot_options[k] = opts
+            rngs.append(self.rngs[k])
+        if slots:
+            self.episode_return[slots] = 0.0
+            self.episode_length[slots] = 0
+            self._reset_slots(slots, rngs, opts)
 
     def step(
         self, actions: np.ndarray, idx: np.ndarray | None = None
@@ -138,6 +160,11 @@ class BatchedCore:
     # ------------------------------------------------------------------------------------------ family hooks
     def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
         raise NotImplementedError
+
+    def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
+        # Families override this to build several levels together; the RNG calls stay per slot and in order.
+        for k, rng in zip(slots, rngs, strict=True):
+            self._reset_slot(k, rng, opts)
 
     def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
@@ -311,8 +338,8 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         if mask.shape != (self.num_envs,):
             raise ValueError(f"reset_mask has shape {mask.shape}; expected ({self.num_envs},)")
         seeds = self._slot_seeds(seed)
-        for k in np.flatnonzero(mask):
-            self.core.reset_slot(int(k), seeds[k], options)
+        slots = np.flatnonzero(mask)
+        self.core.reset_slots(slots, [seeds[k] for k in slots], options)
         self._needs_reset[mask] = False
         infos: dict[str, Any] = {}
         for k in np.flatnonzero(mask):
@@ -343,8 +370,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
                 rewards[live], terminated[live] = r, t
             else:
                 finals = {}
-            for k in restart:
-                self.core.reset_slot(int(k))
+            self.core.reset_slots(restart)
         else:
             rewards, terminated, finals = self.core.step(actions)
             rewards = np.asarray(rewards, dtype=np.float64)

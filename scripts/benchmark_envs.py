@@ -9,8 +9,8 @@ reference memory-gym==1.0.2, side by side in one run.
     longest, MysteryPath-v0, runs 512 steps per episode. ``--max-total-steps`` (default 100k, as in the reference
     run) caps a run and cuts it mid-episode if ever reached.
 (b) batched: the native core with 16 and 64 slots driven directly, as the trainer does: ``core.step`` on all slots
-    with a constant no-op action, reset of the finished slots with fresh seeds, and a copy of all observations, for
-    ``--batched-steps`` slot-steps after a short warm-up.
+    with a constant no-op action, one ``core.reset_slots`` of the finished slots with fresh seeds, and a copy of all
+    observations, for ``--batched-steps`` slot-steps after a short warm-up.
 
 Each measurement is repeated ``--repeats`` times, ours and the reference's (a) interleaved, and the best run is
 kept on both sides: the machine is shared, and the best run is the one least disturbed by other load.
@@ -62,8 +62,7 @@ def bench_batched(env_id: str, num_envs: int, slot_steps: int) -> dict[str, Any]
     """(b): the core with ``num_envs`` slots: step, reset finished slots with new seeds, fetch the observations."""
     core = make_core(env_id, num_envs=num_envs)
     actions = np.stack([np.asarray(noop_action(core.single_action_space))] * num_envs)
-    for k in range(num_envs):
-        core.reset_slot(k, seed=k)
+    core.reset_slots(range(num_envs), list(range(num_envs)))
     next_seed = num_envs
 
     def run(steps: int) -> tuple[int, int]:
@@ -71,10 +70,11 @@ def bench_batched(env_id: str, num_envs: int, slot_steps: int) -> dict[str, Any]
         done_steps = episodes = 0
         while done_steps < steps:
             _, terminated, _ = core.step(actions)
-            for k in np.flatnonzero(terminated):
-                core.reset_slot(int(k), seed=next_seed)
-                next_seed += 1
-                episodes += 1
+            if terminated.any():
+                done = np.flatnonzero(terminated)
+                core.reset_slots(done, list(range(next_seed, next_seed + done.size)))
+                next_seed += done.size
+                episodes += done.size
             core.observations()
             done_steps += num_envs
         return done_steps, episodes

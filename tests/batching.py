@@ -19,11 +19,19 @@ def check_batched_equals_singles(
 ) -> tuple[list[BatchedCore], int]:
     """Step an ``n``-slot core and ``n`` one-slot cores side by side; assert identical rewards, flags, infos, frames
     and debug views. Slot k uses ``options[k % len(options)]``; finished slots restart with continued generators.
+    The batched core resets the slots that share options together (``reset_slots``), the one-slot cores one by one.
     Returns the one-slot cores and the number of finished episodes."""
     batched = envs.make_core(env_id, num_envs=n)
     singles = [envs.make_core(env_id) for _ in range(n)]
+
+    def reset_batched(slots: Sequence[int], seeds: Sequence[int | None]) -> None:
+        for group in range(len(options)):
+            chosen = [i for i, k in enumerate(slots) if k % len(options) == group]
+            if chosen:
+                batched.reset_slots([slots[i] for i in chosen], [seeds[i] for i in chosen], options[group])
+
+    reset_batched(range(n), [100 + k for k in range(n)])
     for k in range(n):
-        batched.reset_slot(k, seed=100 + k, options=options[k % len(options)])
         singles[k].reset_slot(0, seed=100 + k, options=options[k % len(options)])
     rng = np.random.default_rng(0)
     episodes = 0
@@ -38,8 +46,8 @@ def check_batched_equals_singles(
             assert values_equal(jsonable(batched.step_info(k)), jsonable(singles[k].step_info(0)))
             if term[0]:
                 episodes += 1
-                batched.reset_slot(k, options=options[k % len(options)])  # the generator continues
                 singles[k].reset_slot(0, options=options[k % len(options)])
+        reset_batched(live[terminated].tolist(), [None] * int(terminated.sum()))  # the generators continue
         np.testing.assert_array_equal(batched.observations(), np.stack([s.observations()[0] for s in singles]))
         if t % 25 == 0:
             for k in range(n):

@@ -7,6 +7,7 @@ digest, reward, terminated/truncated flags and info.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -130,13 +131,23 @@ def replay_batched(env_id: str, root: Path = TRACE_ROOT, max_mismatches: int = 5
             return [{key: v[i] for key, v in frames.items()} for i in range(slots.size)]
         return list(frames)
 
-    for k, (previous, ep) in enumerate(chosen):
-        if previous is not None:  # rebuild what the reference instance carried over
-            core.reset_slot(k, seed=previous["seed"], options=previous["options"])
-            for action in previous["actions"]:
-                core.step(np.array([action]), idx=np.array([k]))
-        core.reset_slot(k, seed=ep["seed"], options=ep["options"])
-        check(ep["name"], 0, (obs_digest(frames_of(np.array([k]))[0]),), (ep["reset_obs"],))
+    # Slots whose episodes share options are reset together (``reset_slots``), as the trainer resets them.
+    def reset_groups(eps: list[tuple[int, dict]]) -> None:
+        groups: dict[str, list[tuple[int, dict]]] = {}
+        for k, ep in eps:
+            groups.setdefault(json.dumps(ep["options"], sort_keys=True), []).append((k, ep))
+        for group in groups.values():
+            core.reset_slots([k for k, _ in group], [ep["seed"] for _, ep in group], group[0][1]["options"])
+
+    previous_eps = [(k, previous) for k, (previous, _) in enumerate(chosen) if previous is not None]
+    reset_groups(previous_eps)  # rebuild what the reference instance carried over
+    for k, previous in previous_eps:
+        for action in previous["actions"]:
+            core.step(np.array([action]), idx=np.array([k]))
+    reset_groups(list(enumerate(episodes)))
+    reset_frames = frames_of(np.arange(len(episodes)))
+    for k, ep in enumerate(episodes):
+        check(ep["name"], 0, (obs_digest(reset_frames[k]),), (ep["reset_obs"],))
     for t in range(max(len(ep["actions"]) for ep in episodes)):
         live = np.array([k for k, ep in enumerate(episodes) if t < len(ep["actions"])])
         actions = np.array([episodes[k]["actions"][t] for k in live])

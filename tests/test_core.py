@@ -71,6 +71,28 @@ def test_invalid_reset_leaves_the_episode_untouched() -> None:
     np.testing.assert_array_equal(env.unwrapped.core.observations()[0], obs)
 
 
+def test_reset_slots_equals_resetting_each_slot_and_validates_first() -> None:
+    together, one_by_one = (
+        envs.make_core("ProofOfMemory-v0", num_envs=5),
+        envs.make_core("ProofOfMemory-v0", num_envs=5),
+    )
+    together.reset_slots([4, 1, 2], [30, None, 32], {"delay": 3})
+    for k, seed in [(4, 30), (1, None), (2, 32)]:
+        one_by_one.reset_slot(k, seed, {"delay": 3})
+    for k in (2, 4):
+        assert together.seeds[k] == one_by_one.seeds[k]
+        np.testing.assert_array_equal(together.cue[k], one_by_one.cue[k])
+        assert together.delay[k] == 3
+    np.testing.assert_array_equal(together.observations([2, 4]), one_by_one.observations([2, 4]))
+    before = together.observations()
+    with pytest.raises(ValueError, match="got 1 seeds for 2 slots"):
+        together.reset_slots([0, 3], [1])
+    with pytest.raises(ValueError, match="seed=-1 is invalid"):
+        together.reset_slots([0, 3], [1, -1])
+    assert together.seeds[0] is None and together.seeds[3] is None  # nothing was reset
+    np.testing.assert_array_equal(together.observations(), before)
+
+
 def test_make_core_rejects_unknown_ids_and_bad_sizes() -> None:
     with pytest.raises(ValueError, match="unknown environment id 'Nope-v0'; valid ids: ProofOfMemory-v0"):
         envs.make_core("Nope-v0")
