@@ -8,7 +8,8 @@
 
 The memory module is ``none`` (identity), ``gru`` or ``lstm``. Non-recurrent layers always see a flat batch of
 real steps; only the memory module sees the (sequences, length) layout, which it takes from the padding mask of
-the minibatch (:meth:`RecurrentMemory.sequences`, which runs the recurrence packed, so padding costs nothing).
+the minibatch (:meth:`RecurrentMemory.sequences`, which runs the recurrence packed, so padding costs nothing; the
+GRU runs through :func:`agents.packed_gru.packed_gru`, whose backward suits the CPU).
 A memory module keeps its state as one tensor per environment
 (``state_shape``), so the buffer stores it like any other field. A transformer memory (``trxl``) or a HELM branch
 (a frozen feature extractor whose outputs the buffer caches) plug into the same seams: a new entry in
@@ -32,6 +33,7 @@ from torch.nn import functional as F
 from torch.nn.utils.rnn import PackedSequence
 
 from agents.config import MEMORY_KINDS, ModelConfig
+from agents.packed_gru import packed_gru
 
 HIDDEN_GAIN = math.sqrt(2)
 POLICY_GAIN = 0.1
@@ -165,6 +167,13 @@ class RecurrentMemory(nn.Module):
 
     def step(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
         """One step of ``B`` environments: features (B, F), state (B, *state_shape)."""
+        if self.kind == "gru":  # a packed batch of B sequences of one step; every layer's output is its new state
+            dtype = compute_dtype(self.rnn.weight_ih_l0)
+            states, layer_input = [], features
+            for layer, h0 in enumerate(state.transpose(0, 1)):
+                layer_input = packed_gru(self.rnn, layer_input, h0[None], [features.shape[0]], dtype, layer)
+                states.append(layer_input)
+            return layer_input.to(features.dtype), torch.stack(states, dim=1)
         output, final = self.rnn(features.unsqueeze(1), self._to_rnn(state.to(features.dtype)))
         return output.squeeze(1), self._from_rnn(final)
 
@@ -182,10 +191,19 @@ class RecurrentMemory(nn.Module):
         sorted_mask = mask[order]
         time_major = row[order].T[sorted_mask.T]  # packed order: step t of every sequence longer than t
         batch_sizes = sorted_mask.sum(dim=0).cpu()
-        packed = PackedSequence(features[time_major], batch_sizes[batch_sizes > 0], order, torch.argsort(order))
-        output, _ = self.rnn(packed, self._to_rnn(start_state.to(features.dtype)))
-        result = torch.empty_like(output.data)
-        result[time_major] = output.data
+        batch_sizes = batch_sizes[batch_sizes > 0]
+        if self.kind == "gru":
+            dtype = compute_dtype(self.rnn.weight_ih_l0)
+            layer_input = features[time_major]
+            for layer in range(self.rnn.num_layers):
+                h0 = start_state[order, layer][None]
+                layer_input = packed_gru(self.rnn, layer_input, h0, batch_sizes.tolist(), dtype, layer)
+            output = layer_input.to(features.dtype)
+        else:
+            packed = PackedSequence(features[time_major], batch_sizes, order, torch.argsort(order))
+            output = self.rnn(packed, self._to_rnn(start_state.to(features.dtype)))[0].data
+        result = torch.empty_like(output)
+        result[time_major] = output
         return result
 
     def _to_rnn(self, state: Tensor) -> Tensor | tuple[Tensor, Tensor]:

@@ -10,7 +10,14 @@ import pytest
 import torch
 
 from agents.config import ModelConfig
-from agents.models import ActorCritic, NatureCNN, log_probs_and_entropy, model_inputs, sample_actions
+from agents.models import (
+    ActorCritic,
+    NatureCNN,
+    RecurrentMemory,
+    log_probs_and_entropy,
+    model_inputs,
+    sample_actions,
+)
 from agents.sequences import pad_sequences, split_sequences
 
 IMAGE = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
@@ -169,3 +176,52 @@ def test_padding_changes_no_output_and_no_gradient(memory: str) -> None:
         torch.testing.assert_close(padded_loss, loss, atol=1e-6, rtol=1e-6)
         for a, b in zip(padded_grads, grads, strict=True):
             torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
+
+
+@pytest.mark.parametrize("layers", [1, 2])
+def test_packed_gru_equals_torch_gru_in_outputs_and_every_gradient(layers: int) -> None:
+    """RecurrentMemory('gru') runs its own packed recurrence: same outputs, final states and gradients (inputs,
+    start states, all weights and biases) as nn.GRU on the padded batch, in float32."""
+    from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
+
+    torch.manual_seed(3)
+    lengths = [5, 9, 1, 9, 3]
+    memory = RecurrentMemory("gru", 6, 8, layers)
+    mask = torch.arange(9)[None] < torch.tensor(lengths)[:, None]
+    features = torch.randn(int(mask.sum()), 6, requires_grad=True)
+    start = torch.randn(len(lengths), layers, 8, requires_grad=True)
+    ours = memory.sequences(features, start, mask)
+    weights = torch.randn_like(ours)
+    (ours * weights).sum().backward()
+    got = [features.grad, start.grad] + [p.grad for p in memory.parameters()]
+    features.grad, start.grad = None, None
+    memory.zero_grad()
+
+    padded = torch.zeros(len(lengths), 9, 6)
+    padded[mask] = features
+    packed = pack_padded_sequence(padded, torch.tensor(lengths), batch_first=True, enforce_sorted=False)
+    output, _ = memory.rnn(packed, start.transpose(0, 1).contiguous())
+    theirs = pad_packed_sequence(output, batch_first=True)[0][mask]
+    (theirs * weights).sum().backward()
+    expected = [features.grad, start.grad] + [p.grad for p in memory.parameters()]
+    torch.testing.assert_close(ours, theirs, rtol=1e-5, atol=1e-6)
+    for mine, reference in zip(got, expected, strict=True):
+        torch.testing.assert_close(mine, reference, rtol=1e-4, atol=1e-6)
+
+    step_out, step_state = memory.step(features[:5].detach(), start[:, :, :].detach())
+    _, final = memory.rnn(features[:5, None].detach(), start.transpose(0, 1).contiguous().detach())
+    torch.testing.assert_close(step_state, final.transpose(0, 1), rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(step_out, final[-1], rtol=1e-5, atol=1e-6)
+
+
+def test_packed_gru_under_bfloat16_autocast_stays_close_to_float32() -> None:
+    torch.manual_seed(4)
+    memory = RecurrentMemory("gru", 32, 16, 1)
+    mask = torch.arange(20)[None] < torch.tensor([20, 13, 7])[:, None]
+    features = torch.randn(int(mask.sum()), 32)
+    start = torch.randn(3, 1, 16)
+    exact = memory.sequences(features, start, mask)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        mixed = memory.sequences(features, start, mask)
+    assert mixed.dtype == torch.float32
+    assert (mixed - exact).abs().max() < 0.05
