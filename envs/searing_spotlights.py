@@ -6,19 +6,22 @@ coin after another, each within ``steps_per_coin`` steps. The agent, the coins a
 darkness by default, so they are seen only inside a spotlight (and in the first, still lit frames).
 
 How a frame is drawn, array-native across slots (frames are kept as (84, 252) byte rows). Most frames (darkness
-alpha 255, no spotlight rings) are "black everywhere, the lit picture inside the spotlight holes", so a frame is
-``hole_mask & lit`` where
+alpha 255, no spotlight rings) are "black everywhere, the picture under the darkness inside the spotlight holes",
+so a frame is ``hole_mask & under`` where
 
 * ``lit`` is kept per slot and changes only when a coin is taken or the exit opens: the floor plus the coins and
   the exit, in a blue and a red (hit) version;
-* ``hole_mask`` is gathered row by row from one table of 0/255 rows, one row per horizontal span ``[lo, hi]``:
-  every filled disc of pygame is a stack of such spans, so each spotlight contributes one table row per screen row,
-  and rows crossed by two or more spotlights are OR-ed in a few extra passes.
+* ``under`` is kept per slot too: the blue or red ``lit`` with the hidden agent on top. It is rebuilt when ``lit``
+  or the floor colour changes; an agent that moved or turned is erased (its rows copied back from ``lit``) and
+  pasted again, all slots in one scatter;
+* ``hole_mask`` is gathered row by row, straight into the frames, from one table of 0/255 rows, one row per
+  horizontal span ``[lo, hi]``: every filled disc of pygame is a stack of such spans, so each spotlight
+  contributes one table row per screen row. A screen row crossed by several spotlights points to a scratch table
+  row instead, the OR of its spans.
 
-The agent (drawn under the darkness too) is pasted, masked by the holes, only in the slots where it is near a hole,
-with one scatter for all of them. Frames with a partly transparent darkness (the first steps while the light dims,
-``light_threshold`` below 255) or with spotlight rings (``black_background``) blend the lit picture with the
-darkness using SDL's arithmetic, ``D + trunc((S - D) * A / 255)``. The HUD rows come from small row tables.
+Frames with a partly transparent darkness (the first steps while the light dims, ``light_threshold`` below 255)
+or with spotlight rings (``black_background``) blend ``under`` with the darkness using SDL's arithmetic,
+``D + trunc((S - D) * A / 255)``. The HUD rows come from small row tables.
 
 Mechanics per step are array operations as well: settings that depend only on the episode's options (velocities,
 bounds, the alpha of every step, draw orders) are derived once per distinct option set; whether the agent touches a
@@ -136,16 +139,6 @@ def floor_rows(kind: int, hit: bool) -> np.ndarray:
 
 
 @cache
-def agent_extent(scale: float) -> float:
-    """Distance from the agent sprites' centre pixel to their farthest opaque pixel (all eight headings)."""
-    extent = 0.0
-    for sprite in agent_sprites(scale):
-        ys, xs = np.nonzero(sprite.mask)
-        extent = max(extent, float(np.hypot(ys - sprite.height // 2, xs - sprite.width // 2).max()))
-    return extent
-
-
-@cache
 def coin_sprite(scale: float) -> Sprite:
     """A coin: a yellow disc with an orange rim of width int(2 * scale); width 0 makes pygame fill it orange."""
     radius = int(10 * scale)
@@ -185,6 +178,9 @@ def ring_mask(radius: int) -> np.ndarray:
 def span_code(lo: np.ndarray | int, hi: np.ndarray | int) -> np.ndarray | int:
     """Index of the span [lo, hi] (0 <= lo <= hi <= 83) in :func:`span_rows`; 0 is the empty span."""
     return lo * (2 * SCREEN - 1 - lo) // 2 + hi + 1
+
+
+SPAN_CODES = span_code(SCREEN - 1, SCREEN - 1) + 1
 
 
 @cache
@@ -403,7 +399,6 @@ SETTINGS = np.dtype(
         ("vel", np.int64, (9, 2)),  # (dx, dy) per action code
         ("agent_radius", np.int64),
         ("agent_sprite0", np.int64),  # id of the heading-0 agent sprite in the core's SpriteScatter
-        ("agent_near", np.float64),  # agent sprite extent + 2.5 (hole raster and centre truncation); -1: visible
         ("max_health", np.float64),
         ("spot_damage", np.float64),
         ("reward_inside", np.float64),
@@ -439,7 +434,6 @@ SPOTS = np.dtype(
         ("radius", np.int64),
         ("base", np.intp),  # hole table offset of the radius
         ("reach", np.float64),  # hit distance: radius + agent radius
-        ("near", np.float64),  # distance within which the hole may overlap the (hidden) agent's sprite
         ("speed", np.float64),
         ("tau", np.float64),
         ("start", np.complex128),
@@ -531,8 +525,14 @@ class SearingSpotlightsCore(BatchedCore):
         self.frame_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
         self.frames = self.frame_buffer[:n]
         self.lit = np.zeros((2, n, SCREEN, ROW_BYTES), np.uint8)  # floor + coins + exit; blue and red floor
-        self.holes = np.zeros((n * SCREEN, ROW_BYTES), np.uint8)  # 0/255 hole masks of the stepped slots
-        self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: the span code gathered into ``holes``
+        self.under_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
+        self.under = self.under_buffer[:n]  # what lies under the darkness: lit (blue or red) + hidden agent
+        self.under_key = np.full(n, -1, i64)  # what ``under`` shows (see ``_update_under``); -1: to rebuild
+        self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: its row of ``span_table``
+        # the span table, then scratch rows for frame rows crossed by several spans
+        self.span_table = np.zeros((SPAN_CODES + n * SCREEN, ROW_BYTES), np.uint8)
+        self.span_table[:SPAN_CODES] = span_rows()
+        self.span_words = self.span_table.view(np.uint32)  # the same rows as 63 words, for OR-ing
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
@@ -562,9 +562,7 @@ class SearingSpotlightsCore(BatchedCore):
         record["pos_high"] = SCREEN - radius, SCREEN - radius
         vx, vy = continuous_velocity(ACTION_PAIRS, np.full(9, float(opts["agent_speed"])))
         record["vel"] = np.stack([vx, vy], axis=1)
-        extent = agent_extent(float(opts["agent_scale"]))
         record["agent_sprite0"] = self.agent_sprites.add(agent_sprites(float(opts["agent_scale"])))
-        record["agent_near"] = -1.0 if opts["agent_visible"] else extent + 2.5
         record["max_health"] = opts["agent_health"]
         record["spot_damage"] = opts["spot_damage"]
         record["reward_inside"] = opts["reward_inside_spotlight"]
@@ -615,7 +613,7 @@ class SearingSpotlightsCore(BatchedCore):
     def _unused_spot_record(self) -> np.void:
         record = np.zeros((), SPOTS)
         record["base"] = self.tables.base(0)
-        record["reach"] = record["near"] = -1.0
+        record["reach"] = -1.0
         record["start"] = record["target"] = record["offset"] = record["centre"] = complex(CENTRE, CENTRE)
         return record[()]
 
@@ -646,8 +644,7 @@ class SearingSpotlightsCore(BatchedCore):
             point = SCREEN_CENTRE + orbit.rotate(float(angle))
             points.append(complex(point.x, point.y))
         reach = radius + float(self.agent_radius[k])
-        near = radius + float(self.agent_near[k]) if self.agent_near[k] >= 0 else -1.0
-        return (radius, self.tables.base(radius), reach, near, speed, 0.0, *points, points[0], False, True, False)
+        return (radius, self.tables.base(radius), reach, speed, 0.0, *points, points[0], False, True, False)
 
     def _append_spot(self, k: int) -> None:
         j = int(self.spot_count[k])
@@ -720,13 +717,10 @@ class SearingSpotlightsCore(BatchedCore):
         self._build_lit(k)
         # the reset frame: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
         slot = np.array([k])
+        self._update_under(slot, np.zeros(1, bool))
         out = np.empty((2, SCREEN, ROW_BYTES), np.uint8)  # the frame and a scratch frame
-        out[0] = self.lit[0, k]
-        if self.agent_hidden[k]:
-            self._paste_agents(out, np.zeros(1, np.intp), slot)
         alpha = int(self.alphas[k, 0])
-        if alpha:
-            out[0] = darken(out[0], np.array(alpha))
+        out[0] = darken(self.under[k], np.array(alpha)) if alpha else self.under[k]
         self._finish_frames(slot, out)
         self.frames[k] = out[0]
 
@@ -872,8 +866,8 @@ class SearingSpotlightsCore(BatchedCore):
     def _spotlight_pass(self, idx: Index, pos: np.ndarray) -> tuple[np.ndarray, tuple]:
         """Draw (record), move and hit-test the spotlights; finished ones are removed when next visited.
 
-        Returns the per-slot hit flags and what the drawing needs: the centres, table offsets, the drawn
-        spotlights and those near the agent.
+        Returns the per-slot hit flags and what the drawing needs: the centres, table offsets and the drawn
+        spotlights.
         """
         spots = self.spots[idx]
         tau = spots["tau"]
@@ -884,7 +878,6 @@ class SearingSpotlightsCore(BatchedCore):
         dx, dy = delta.real, delta.imag
         distance = np.sqrt(dx * dx + dy * dy)
         hits = distance <= spots["reach"]
-        near = distance <= spots["near"]
         base = spots["base"]
         done = spots["done"]
         drawn = spots["listed"]
@@ -898,7 +891,6 @@ class SearingSpotlightsCore(BatchedCore):
             drawn = visited & drawn & ~done
             removed = visited & done
             hits &= drawn
-            near &= drawn
             speed = spots["speed"] * drawn  # only the visited spotlights move
         else:
             speed = spots["speed"]
@@ -921,7 +913,7 @@ class SearingSpotlightsCore(BatchedCore):
         if removed is not None and removed.any():
             base = base.copy()  # a view of the arrays that the removal compacts
             self._remove_spots(idx, removed)
-        return hits.any(axis=1), (centre, base, drawn, near)
+        return hits.any(axis=1), (centre, base, drawn)
 
     def _remove_spots(self, idx: Index, removed: np.ndarray) -> None:
         """Compact the spotlight lists (keeping their order); freed positions get the unused values."""
@@ -936,28 +928,22 @@ class SearingSpotlightsCore(BatchedCore):
 
     # ---------------------------------------------------------------------------------------------- draw
     def _draw(self, idx: Index, slots: np.ndarray, n: int, hit: np.ndarray, hud_code: np.ndarray, spots) -> None:
-        t = self.t[idx]
         """Compose the frames of the stepped slots (see the module docstring)."""
-        centre, base, drawn, near = spots
-        holes = self._hole_masks(n, centre, base, drawn)
-        buffer = self.frame_buffer if isinstance(idx, slice) else np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
+        self._update_under(slots, hit & self.red_feedback[idx])
+        full = isinstance(idx, slice)
+        buffer = self.frame_buffer if full else np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
         out = buffer[:n]
-        np.bitwise_and(holes, self.lit[0][idx], out=out)
+        self._hole_masks(out, *spots)
+        blend = np.flatnonzero(self.t[idx] < self.blend_until[idx])
+        holes = out[blend] if blend.size else None  # (a copy) the blended frames need their holes
+        np.bitwise_and(out, self.under[:n] if full else self.under[idx], out=out)
+        if blend.size:
+            self._blend_slots(slots[blend], blend, holes, out)
         self.hud[idx, ROW_BYTES // 2 :] = hud_tables()[1][hud_code]
         if hit.any():
-            for i in np.flatnonzero(hit & self.red_feedback[idx]):
-                out[i] = holes[i] & self.lit[1, slots[i]]
             self._paint_red(idx, slots, hud_code)
-        # the hidden agent shows where it overlaps a hole
-        fix = np.flatnonzero(near.any(axis=1))
-        if fix.size:
-            self._paste_agents(buffer, fix, slots[fix], where=holes)
-        blend = t < self.blend_until[idx]
-        if blend.any():
-            local = np.flatnonzero(blend)
-            self._blend_slots(slots[local], local, holes, buffer)
         self._finish_frames(idx, buffer)
-        if not isinstance(idx, slice):
+        if not full:
             self.frames[idx] = out
 
     def _paint_red(self, idx: Index, slots: np.ndarray, hud_code: np.ndarray) -> None:
@@ -972,62 +958,94 @@ class SearingSpotlightsCore(BatchedCore):
                 bool(flags & 4), bool(flags & 2), bool(flags & 1), action, reward_state, int(red[i])
             )
 
-    def _hole_masks(self, n: int, centre: np.ndarray, base: np.ndarray, drawn: np.ndarray) -> np.ndarray:
-        """(n, 84, 252) 0/255 masks of this step's spotlight holes, gathered row by row from the span table.
+    def _hole_masks(self, out: np.ndarray, centre: np.ndarray, base: np.ndarray, drawn: np.ndarray) -> None:
+        """Write the 0/255 masks of this step's spotlight holes into ``out`` ((n, 84, 252)), gathered row by row.
 
         Each disc row writes its span code into its frame row; one gather from the span table then yields every
-        row. Rows crossed by several spotlights keep one code and OR the other spans in, one layer at a time.
+        row. A row crossed by several spotlights gets a scratch table row instead: the OR of all its spans.
         """
         tables = self.tables
-        if n > 4:  # many slots: only the drawn spotlights
-            local, j = np.nonzero(drawn)
-            centre, base = centre[local, j], base[local, j]
-            row_base = local[:, None] * SCREEN
-        else:
-            row_base = self.row_base[:n]
-        codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (..., disc rows)
+        local, j = np.nonzero(drawn)
+        centre, base = centre[local, j], base[local, j]
+        codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (spotlights, disc rows)
         rows = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
         codes *= rows != 0
-        if n <= 4:
-            codes *= drawn[:, :, None]
         keys = rows * (codes != 0)  # empty spans go to row 0 (under the HUD), where they cannot collide
-        keys += row_base
-        index = self.span_index[: n * SCREEN]
+        keys += local[:, None] * SCREEN
+        index = self.span_index[: out.shape[0] * SCREEN]
         index.fill(0)
         index[keys] = codes
-        table = span_rows()
-        holes = self.holes[: n * SCREEN]
-        np.take(table, index, axis=0, out=holes, mode="clip")
-        pending = index[keys] != codes  # spans that lost their row to another one
-        if pending.any():
-            keys, codes = keys[pending], codes[pending]
-            hole_rows, table_rows = holes.view(ROW)[:, 0], table.view(ROW)[:, 0]
-            while keys.size:
-                index[keys] = codes
-                first = index[keys] == codes  # one span per row in this layer
-                target = keys[first]
-                merged = hole_rows[target].view(np.uint8) | table_rows[codes[first]].view(np.uint8)
-                hole_rows[target] = merged.view(ROW)
-                keys, codes = keys[~first], codes[~first]
-        return holes.reshape(n, SCREEN, ROW_BYTES)
+        lost = index[keys] != codes  # spans that lost their row to another one
+        if lost.any():
+            keys, codes = keys[lost], codes[lost]
+            order = np.argsort(keys, kind="stable")
+            keys, codes = keys[order], codes[order]
+            starts = np.diff(keys, prepend=-1) != 0  # groups of lost spans, one per row
+            first = np.flatnonzero(starts)
+            group = np.cumsum(starts) - 1
+            rank = np.arange(keys.size) - first[group]  # position in the group
+            target = keys[first]
+            words = self.span_words
+            unions = words[index[target]]  # the span that kept the row
+            unions |= words[codes[first]]
+            for r in range(1, int(rank.max()) + 1):  # a few layers (np.bitwise_or.reduceat is much slower)
+                layer = np.flatnonzero(rank == r)
+                unions[group[layer]] |= words[codes[layer]]
+            scratch = np.arange(SPAN_CODES, SPAN_CODES + target.size)
+            words[scratch] = unions
+            index[target] = scratch
+        np.take(self.span_table, index, axis=0, out=out.reshape(-1, ROW_BYTES), mode="clip")
 
-    def _paste_agents(self, frames: np.ndarray, local: np.ndarray, slots: np.ndarray, where=None) -> None:
-        """Paste the agents of ``slots`` into ``frames[local]`` (masked by ``where``, e.g. the holes)."""
-        heading = np.where(self.t[slots] > 0, self.heading[slots], 0)  # the reset frame shows it facing up
-        if len(slots) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
-            sprites = self.agent_sprites.sprites
-            for i, k, h in zip(local.tolist(), slots.tolist(), heading.tolist(), strict=True):
-                sprite = sprites[int(self.agent_sprite0[k]) + h]
-                paste_centred(sprite, frames[i], self.x[k], self.y[k], None if where is None else where[i])
+    def _update_under(self, slots: np.ndarray, red: np.ndarray) -> None:
+        """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
+        feedback) with the hidden agent on top. A slot is rebuilt when its lit picture changed or the floor
+        colour flips; an agent that moved or turned is erased (its rows copied back from the lit picture) and
+        pasted again."""
+        ids = np.where(self.agent_hidden[slots], self._agent_ids(slots), -1)
+        key = (((ids + 1) * 128 + self.y[slots]) * 128 + self.x[slots]) * 2 + red  # what is drawn in the slot
+        old = self.under_key[slots]
+        changed = np.flatnonzero(key != old)
+        if not changed.size:
             return
-        ids = self.agent_sprite0[slots] + heading
+        slots, key, old, red, ids = slots[changed], key[changed], old[changed], red[changed], ids[changed]
+        self.under_key[slots] = key
+        n = self.num_envs
+        lit_rows, under_rows = self.lit.view(ROW).reshape(-1), self.under.view(ROW).reshape(-1)
+        source = red * n + slots  # the slots' lit pictures in ``lit`` seen as 2n pictures
+        rebuild = (old < 0) | ((old ^ key) & 1).astype(bool)
+        if rebuild.any():
+            self.under[slots[rebuild]] = self.lit.reshape(-1, SCREEN, ROW_BYTES)[source[rebuild]]
+        erase = np.flatnonzero(~rebuild & (old >= 2 * 128 * 128))  # an agent was drawn: copy its rows back
+        if erase.size:
+            old_id = old[erase] // (2 * 128 * 128) - 1
+            half = self.agent_sprites.heights[old_id] // 2
+            top = old[erase] // 256 % 128 - half
+            height = int(self.agent_sprites.heights[old_id].max())
+            rows = np.clip(top[:, None] + np.arange(height), 0, SCREEN - 1)
+            under_rows[slots[erase, None] * SCREEN + rows] = lit_rows[source[erase, None] * SCREEN + rows]
+        paste = np.flatnonzero(ids >= 0)
+        if paste.size:
+            self._paste_agents(self.under_buffer, slots[paste], ids[paste], self.x[slots[paste]], self.y[slots[paste]])
+
+    def _paste_agents(self, frames: np.ndarray, local: np.ndarray, ids: np.ndarray, x: np.ndarray, y: np.ndarray):
+        """Paste agent sprites ``ids`` centred on (x, y) into ``frames[local]`` (a buffer ending with a spare frame)."""
+        if len(local) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
+            sprites = self.agent_sprites.sprites
+            for i, sprite_id, cx, cy in zip(local.tolist(), ids.tolist(), x.tolist(), y.tolist(), strict=True):
+                paste_centred(sprites[sprite_id], frames[i], cx, cy)
+            return
         half = self.agent_sprites.heights[ids] // 2  # square sprites, centred on the agent
         frames = frames.reshape(-1, SCREEN, SCREEN, 3)
-        self.agent_sprites.paste(frames, local, ids, self.y[slots] - half, self.x[slots] - half, True, where)
+        self.agent_sprites.paste(frames, local, ids, y - half, x - half, True)
+
+    def _agent_ids(self, slots: np.ndarray) -> np.ndarray:
+        """The agents' sprite ids in the current frames (the reset frame shows the agent facing up)."""
+        return self.agent_sprite0[slots] + (self.t[slots] > 0) * self.heading[slots]
 
     def _build_lit(self, k: int) -> None:
         """Slot k's lit pictures (blue and red floor) with its coins and exit, in the reference's order."""
         rows = self.lit[:, k]
+        self.under_key[k] = -1  # rebuild the picture under the darkness
         kind = int(self.floor_kind[k])
         rows[0] = floor_rows(kind, False)
         rows[1] = floor_rows(kind, bool(self.red_feedback[k]))
@@ -1042,7 +1060,8 @@ class SearingSpotlightsCore(BatchedCore):
     def _paste_entity(self, frames: np.ndarray, i: int, k: int, name: str) -> None:
         """Paste one entity of slot k into frame ``i`` of ``frames`` (a buffer ending with a scratch frame)."""
         if name == "agent":
-            self._paste_agents(frames, np.array([i]), np.array([k]))
+            slot = np.array([k])
+            self._paste_agents(frames, np.array([i]), self._agent_ids(slot), self.x[slot], self.y[slot])
         elif name == "coins":
             coin, radius = coin_sprite(float(self.coin_scale[k])), int(10 * self.coin_scale[k])
             for j in np.flatnonzero(self.coin_alive[k]):
@@ -1078,21 +1097,13 @@ class SearingSpotlightsCore(BatchedCore):
     def _blend_slots(self, slots: np.ndarray, local: np.ndarray, holes: np.ndarray, out: np.ndarray) -> None:
         """Frames with a partly transparent darkness or with spotlight rings: lit in the holes, blended elsewhere.
 
-        ``slots`` are slot numbers, ``local`` their frames in ``holes`` ((n, 84, 252) of 0/255) and in ``out``.
+        ``slots`` are slot numbers, ``holes`` their 0/255 hole masks and ``local`` their frames in ``out``.
         """
-        buffer = np.empty((len(slots) + 1, SCREEN, ROW_BYTES), np.uint8)  # with a scratch frame
-        lit = buffer[:-1]
-        np.take(self.lit[0], slots, axis=0, out=lit)
-        red = np.flatnonzero(self.hit[slots] & self.red_feedback[slots])
-        if red.size:
-            lit[red] = self.lit[1, slots[red]]
-        hidden = np.flatnonzero(self.agent_hidden[slots])
-        if hidden.size:
-            self._paste_agents(buffer, hidden, slots[hidden])
+        lit = self.under[slots]
         alpha = self.alpha(slots)
         if alpha.any():
             dark = darken(lit, alpha[:, None, None])
-            blended = dark ^ ((dark ^ lit) & holes[local])
+            blended = dark ^ ((dark ^ lit) & holes)
             for i, k in enumerate(slots):
                 if self.rings[k]:
                     self._draw_rings(int(k), blended[i], lit[i])

@@ -14,6 +14,7 @@ from envs.searing_spotlights import (
     HUD_GREY,
     RED,
     SCREEN,
+    SPOTS,
     YELLOW,
     SearingSpotlightsCore,
     alpha_schedule,
@@ -115,10 +116,12 @@ def test_spotlight_creation_makes_the_five_draws_in_the_reference_order() -> Non
     start = twin.integers(0, 360)
     target = start + 180 + twin.integers(-45, 45)
     offset = target + twin.integers(-135, 135)
-    assert record[0] == radius and record[4] == speed
+    spot = np.array(record, SPOTS)
+    assert spot["radius"] == radius and spot["speed"] == speed
     assert rng.integers(0, 2**62) == twin.integers(0, 2**62)  # no further draws
     orbit = 42 * np.sqrt(2) + radius
-    for point, angle in zip(record[6:9], (start, target, offset), strict=True):
+    points = (spot["start"], spot["target"], spot["offset"])
+    for point, angle in zip(points, (start, target, offset), strict=True):
         expected = complex(42 + orbit * np.cos(np.radians(angle)), 42 + orbit * np.sin(np.radians(angle)))
         assert abs(point - expected) < 1e-9  # angles grow clockwise on screen, around the screen centre
 
