@@ -211,7 +211,7 @@ class HoleTables:
         self.width = 2 * reach + 1
         centres = np.arange(self.low, self.low + self.width)
         depth = 2 * max_radius
-        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.int16)
+        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.intp)
         self.rows = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.intp)
         for radius in range(1, max_radius + 1):
             mask, offset = disc_mask(radius)
@@ -240,8 +240,13 @@ def hole_tables(max_radius: int) -> HoleTables:
 # ------------------------------------------------------------------------------------------------ blending
 def darken(rows: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16)."""
-    product = rows.astype(np.uint16) * alpha.astype(np.uint16)
-    return (rows - ((product + 1 + (product >> 8)) >> 8)).astype(np.uint8)
+    product = rows.astype(np.uint16)
+    product *= np.asarray(alpha, np.uint16)
+    share = product >> 8  # in place from here: fewer passes over the frames
+    share += product
+    share += 1
+    share >>= 8  # floor(product / 255), exact for products up to 255 * 255
+    return rows - share.astype(np.uint8)
 
 
 def lighten(rows: np.ndarray, alpha: int) -> np.ndarray:
@@ -293,6 +298,28 @@ def hud_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------------------------------------ sampler
+def uniform(rng: np.random.Generator, low: float, high: float) -> float:
+    """``rng.uniform(low, high)`` (same value, same generator state) at a fraction of its cost: numpy computes
+    ``low + (high - low) * next_double``, and a double is the top 53 bits of the next 64-bit output, which PCG64
+    takes without touching a buffered 32-bit half (as ``random_raw`` does)."""
+    low, high = float(low), float(high)
+    return low + (high - low) * ((int(rng.bit_generator.random_raw()) >> 11) * (1.0 / 9007199254740992.0))
+
+
+@cache
+def orbit_points(radius: int) -> np.ndarray:
+    """Points at the angles 0..719 degrees on a spotlight's orbit (pygame's rotation, for the reference's floats).
+
+    Spotlights start, turn and end at angles ``start`` (0..359), ``start + 180 + (-45..44)`` and that plus
+    ``-135..134``, all within 0..719.
+    """
+    orbit = pygame.math.Vector2(SPOT_ORBIT + radius, 0)
+    points = [SCREEN_CENTRE + orbit.rotate(float(angle)) for angle in range(720)]
+    table = np.array([complex(point.x, point.y) for point in points])
+    table.setflags(write=False)
+    return table
+
+
 @cache
 def _block_disc(radius: int) -> np.ndarray:
     """Pixels at squared distance < radius^2 from the centre, as a (2r-1, 2r-1) mask."""
@@ -485,7 +512,8 @@ class SearingSpotlightsCore(BatchedCore):
             gym.spaces.Box(np.zeros(4, np.float32), np.ones(4, np.float32), (4,), np.float32) if self.endless else None
         )
         super().__init__(num_envs, options)
-        self.resolve(None)  # cross-checks of the constructor options
+        self._defaults: dict[str, Any] | None = None
+        self._defaults = self.resolve(None)  # (cross-checks the constructor options) shared by default resets
         n = self.num_envs
         self.all_slots = np.arange(n)
         self.row_base = self.all_slots[:, None, None] * SCREEN  # first frame row of each slot
@@ -536,6 +564,8 @@ class SearingSpotlightsCore(BatchedCore):
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
+        if not options and self._defaults is not None:  # (never modified: slots share it read-only)
+            return self._defaults
         opts = super().resolve(options)
         for low, high in (("spot_min_radius", "spot_max_radius"), ("spot_min_speed", "spot_max_speed")):
             if opts[low] > opts[high]:
@@ -544,7 +574,10 @@ class SearingSpotlightsCore(BatchedCore):
 
     def _episode_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
         """The settings record and draw orders for ``opts`` (cached: most episodes share their options)."""
-        key = tuple(tuple(v) if isinstance(v, list) else v for v in opts.values())
+        if opts is self._defaults:
+            key = None
+        else:
+            key = tuple(tuple(v) if isinstance(v, list) else v for v in opts.values())
         cached = self._settings_cache.get(key)
         if cached is None:
             if len(self._settings_cache) > 256:
@@ -634,17 +667,14 @@ class SearingSpotlightsCore(BatchedCore):
     def _new_spot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> tuple:
         """A spotlight record: radius, speed, then the three angles (the reference's 5 draws, in its order)."""
         radius = int(rng.integers(opts["spot_min_radius"], opts["spot_max_radius"] + 1))
-        speed = rng.uniform(opts["spot_min_speed"], opts["spot_max_speed"])
-        start = rng.integers(0, 360)
-        target = start + 180 + rng.integers(-45, 45)
-        offset = target + rng.integers(-135, 135)
-        orbit = pygame.math.Vector2(SPOT_ORBIT + radius, 0)
-        points = []
-        for angle in (start, target, offset):  # pygame's rotation, for the reference's exact floats
-            point = SCREEN_CENTRE + orbit.rotate(float(angle))
-            points.append(complex(point.x, point.y))
+        speed = uniform(rng, opts["spot_min_speed"], opts["spot_max_speed"])
+        start = int(rng.integers(0, 360))
+        target = start + 180 + int(rng.integers(-45, 45))
+        offset = target + int(rng.integers(-135, 135))
+        points = orbit_points(radius)
+        start, target, offset = points[start], points[target], points[offset]
         reach = radius + float(self.agent_radius[k])
-        return (radius, self.tables.base(radius), reach, speed, 0.0, *points, points[0], False, True, False)
+        return (radius, self.tables.base(radius), reach, speed, 0.0, start, target, offset, start, False, True, False)
 
     def _append_spot(self, k: int) -> None:
         j = int(self.spot_count[k])
@@ -655,20 +685,65 @@ class SearingSpotlightsCore(BatchedCore):
         self.drawn_is_listed = False
 
     # --------------------------------------------------------------------------------------------- reset
-    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
-        record, self.orders[k] = self._episode_settings(opts)
-        self.settings[k] = record
+    def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
+        """New episodes with the same options: per-slot draws in the reference's order, the rest for all at once."""
+        record, orders = self._episode_settings(opts)
+        idx = np.array(slots, dtype=np.int64)
+        self.settings[idx] = record
+        for k in slots:
+            self.orders[k] = orders
         self._use_tables(int(opts["spot_max_radius"]))
-        self.t[k] = 0
-        self.end_t_now[k] = record["end_t"]
-        self.hit[k] = False
-        self.hud_red[k] = 0
-        self.next_spawn[k] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
-        self.spawns_left[k] = 0 if self.endless else opts["num_spawns"]
-        self.coins_collected[k] = self.success[k] = 0
-        self.coin_shown_until[k] = record["coin_show_duration"]
-        self.special_until[k] = NEVER if record["any_visible"] else self.coin_shown_until[k] if self.endless else 0
-        self.exit_open[k] = False
+        self.t[idx] = 0
+        self.end_t_now[idx] = record["end_t"]
+        self.hit[idx] = False
+        self.hud_red[idx] = 0
+        self.next_spawn[idx] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
+        self.spawns_left[idx] = 0 if self.endless else opts["num_spawns"]
+        self.coins_collected[idx] = 0
+        self.success[idx] = 0
+        self.coin_shown_until[idx] = record["coin_show_duration"]
+        shown = record["coin_show_duration"] if self.endless else 0
+        self.special_until[idx] = NEVER if record["any_visible"] else shown
+        self.exit_open[idx] = False
+        self.health[idx] = opts["agent_health"]
+        count = opts["initial_spawns"]
+        if count > self.spots.shape[1]:
+            self._grow_spots(max(count, 2 * self.spots.shape[1]))
+        self.spots[idx, count:] = self.unused_row[count:]
+        self.spot_count[idx] = count
+        self.drawn_is_listed = False
+        self.item_map[idx] = 0
+        if self.endless:
+            self.num_coins[idx] = self.coins_left[idx] = 1
+            self.end_t_now[idx] = min(record["end_t"], record["steps_per_coin"])
+        else:
+            most = max(opts["num_coins"], default=0)
+            if most > self.coin_x.shape[1]:
+                grow = ((0, 0), (0, most - self.coin_x.shape[1]))
+                self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
+                self.coin_alive = np.pad(self.coin_alive, grow)
+            self.coin_alive[idx] = False
+        spots = []
+        for k, rng in zip(slots, rngs, strict=True):
+            spots += self._draw_level(k, rng, opts)
+        if count:
+            self.spots[idx, :count] = np.array(spots, SPOTS).reshape(len(slots), count)
+        self.next_hud[idx] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
+        self.hud[idx] = reset_hud_row(
+            self.endless, bool(opts["show_last_action"]), bool(opts["show_last_positive_reward"])
+        )
+        for k in slots:
+            self._build_lit(k)
+        # the reset frames: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
+        self._update_under(idx, np.zeros(len(slots), bool))
+        out = np.empty((len(slots) + 1, SCREEN, ROW_BYTES), np.uint8)  # the frames and a scratch frame
+        alpha = int(record["alphas"][0])
+        out[:-1] = darken(self.under[idx], np.array(alpha)) if alpha else self.under[idx]
+        self._finish_frames(idx, out)
+        self.frames[idx] = out[:-1]
+
+    def _draw_level(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> list[tuple]:
+        """Slot k's agent, coins and exit, with the reference's draws in its order; returns the first spotlights."""
         mask = np.zeros((SCREEN, SCREEN), bool)
         self.heading[k] = int(rng.integers(0, 8))  # heading index (x 45 degrees): what rng.choice draws
         if opts["sample_agent_position"]:
@@ -678,59 +753,29 @@ class SearingSpotlightsCore(BatchedCore):
             x, y = CENTRE, CENTRE
             block_position(mask, x, y, ITEM_BLOCK)
         self.pos[k] = x, y
-        self.health[k] = opts["agent_health"]
-        count = opts["initial_spawns"]
-        if count > self.spots.shape[1]:
-            self._grow_spots(max(count, 2 * self.spots.shape[1]))
-        spots = self.spots[k]
-        spots[:count] = [self._new_spot(k, rng, opts) for _ in range(count)]
-        spots[count:] = self.unused_row[count:]
-        self.spot_count[k] = count
-        self.drawn_is_listed = False
-        self.item_map[k] = 0
+        spots = [self._new_spot(k, rng, opts) for _ in range(opts["initial_spawns"])]
         if self.endless:
-            self.num_coins[k] = self.coins_left[k] = 1
             self._spawn_endless_coin(k, rng, previous=None)
-            self.end_t_now[k] = min(record["end_t"], record["steps_per_coin"])
-        else:
-            counts = opts["num_coins"]
-            num_coins = int(counts[rng.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
-            self.num_coins[k] = self.coins_left[k] = num_coins
-            self.goal_without_exit[k] = not opts["use_exit"] and num_coins > 0
-            if num_coins > self.coin_x.shape[1]:
-                grow = ((0, 0), (0, num_coins - self.coin_x.shape[1]))
-                self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
-                self.coin_alive = np.pad(self.coin_alive, grow)
-            self.coin_alive[k] = False
-            for j in range(num_coins):
-                cx, cy = sample_position(mask, rng, ITEM_BLOCK)
-                cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
-                self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
-            if opts["use_exit"]:
-                ex, ey = sample_position(mask, rng, ITEM_BLOCK)
-                ex, ey = ex + int(rng.integers(2, 4)), ey + int(rng.integers(2, 4))
-                self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
-                if num_coins == 0:
-                    self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
-        self.next_hud[k] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
-        self.hud[k] = reset_hud_row(self.endless, *self._hud_flags(k))
-        self._build_lit(k)
-        # the reset frame: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
-        slot = np.array([k])
-        self._update_under(slot, np.zeros(1, bool))
-        out = np.empty((2, SCREEN, ROW_BYTES), np.uint8)  # the frame and a scratch frame
-        alpha = int(self.alphas[k, 0])
-        out[0] = darken(self.under[k], np.array(alpha)) if alpha else self.under[k]
-        self._finish_frames(slot, out)
-        self.frames[k] = out[0]
+            return spots
+        counts = opts["num_coins"]
+        num_coins = int(counts[rng.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
+        self.num_coins[k] = self.coins_left[k] = num_coins
+        self.goal_without_exit[k] = not opts["use_exit"] and num_coins > 0
+        for j in range(num_coins):
+            cx, cy = sample_position(mask, rng, ITEM_BLOCK)
+            cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
+            self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
+        if opts["use_exit"]:
+            ex, ey = sample_position(mask, rng, ITEM_BLOCK)
+            ex, ey = ex + int(rng.integers(2, 4)), ey + int(rng.integers(2, 4))
+            self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
+            if num_coins == 0:
+                self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
+        return spots
 
     def alpha(self, slots: np.ndarray | int) -> np.ndarray:
         """The darkness alpha of the slots' current frames."""
         return self.alphas[slots, np.minimum(self.t[slots], ALPHA_STEPS - 1)]
-
-    def _hud_flags(self, k: int) -> tuple[bool, bool]:
-        flags = int(self.hud_flags27[k]) // 27
-        return bool(flags & 2), bool(flags & 1)
 
     def _place_coin(self, k: int, j: int, x: int, y: int) -> None:
         self.coin_x[k, j], self.coin_y[k, j] = x, y
@@ -885,11 +930,14 @@ class SearingSpotlightsCore(BatchedCore):
         if done.any():  # (done is written below: ``removed`` and ``drawn`` are computed first)
             # The reference removes finished spotlights while iterating over its list, so the spotlight right
             # after a removed one is not visited in that step: not drawn, not moved, unable to hit.
-            visited = np.ones_like(drawn)
-            for j in range(1, drawn.shape[1]):
-                visited[:, j] = ~(visited[:, j - 1] & done[:, j - 1])
-            drawn = visited & drawn & ~done
-            removed = visited & done
+            drawn, removed = drawn.copy(), np.zeros_like(done)
+            for i in np.flatnonzero(done.any(axis=1)):
+                visited, skip = [], False
+                for finished in done[i].tolist():
+                    visited.append(not skip)
+                    skip = not skip and finished
+                drawn[i] &= visited & ~done[i]
+                removed[i] = visited & done[i]
             hits &= drawn
             speed = spots["speed"] * drawn  # only the visited spotlights move
         else:
@@ -917,19 +965,21 @@ class SearingSpotlightsCore(BatchedCore):
 
     def _remove_spots(self, idx: Index, removed: np.ndarray) -> None:
         """Compact the spotlight lists (keeping their order); freed positions get the unused values."""
-        spots = self.spots[idx]
-        keep = spots["listed"] & ~removed
+        local = np.flatnonzero(removed.any(axis=1))
+        slots = self.all_slots[idx][local]
+        spots = self.spots[slots]
+        keep = spots["listed"] & ~removed[local]
         order = np.argsort(~keep, axis=1, kind="stable")
         compacted = np.take_along_axis(spots, order, axis=1)
         count = keep.sum(axis=1)
         compacted[np.arange(compacted.shape[1])[None, :] >= count[:, None]] = self.unused_spot
-        self.spots[idx] = compacted
-        self.spot_count[idx] = count
+        self.spots[slots] = compacted
+        self.spot_count[slots] = count
 
     # ---------------------------------------------------------------------------------------------- draw
     def _draw(self, idx: Index, slots: np.ndarray, n: int, hit: np.ndarray, hud_code: np.ndarray, spots) -> None:
         """Compose the frames of the stepped slots (see the module docstring)."""
-        self._update_under(slots, hit & self.red_feedback[idx])
+        self._update_under(idx, hit & self.red_feedback[idx])
         full = isinstance(idx, slice)
         buffer = self.frame_buffer if full else np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
         out = buffer[:n]
@@ -968,58 +1018,71 @@ class SearingSpotlightsCore(BatchedCore):
         local, j = np.nonzero(drawn)
         centre, base = centre[local, j], base[local, j]
         codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (spotlights, disc rows)
-        rows = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
-        codes *= rows != 0
-        keys = rows * (codes != 0)  # empty spans go to row 0 (under the HUD), where they cannot collide
+        keys = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
+        visible = (codes != 0) & (keys != 0)
+        codes *= visible
+        keys *= visible  # empty spans go to row 0 (under the HUD), where they cannot collide
         keys += local[:, None] * SCREEN
+        keys, codes = keys.ravel(), codes.ravel()  # (flat intp arrays: several times faster to scatter)
         index = self.span_index[: out.shape[0] * SCREEN]
         index.fill(0)
         index[keys] = codes
-        lost = index[keys] != codes  # spans that lost their row to another one
-        if lost.any():
+        lost = np.flatnonzero(index[keys] != codes)  # spans that lost their row to another one
+        if lost.size:
             keys, codes = keys[lost], codes[lost]
             order = np.argsort(keys, kind="stable")
             keys, codes = keys[order], codes[order]
-            starts = np.diff(keys, prepend=-1) != 0  # groups of lost spans, one per row
+            starts = np.empty(keys.size, bool)  # groups of lost spans, one per row
+            starts[0] = True
+            np.not_equal(keys[1:], keys[:-1], out=starts[1:])
             first = np.flatnonzero(starts)
             group = np.cumsum(starts) - 1
             rank = np.arange(keys.size) - first[group]  # position in the group
             target = keys[first]
             words = self.span_words
-            unions = words[index[target]]  # the span that kept the row
-            unions |= words[codes[first]]
+            unions = np.take(words, index[target], axis=0)  # the span that kept the row
+            unions |= np.take(words, codes[first], axis=0)
             for r in range(1, int(rank.max()) + 1):  # a few layers (np.bitwise_or.reduceat is much slower)
                 layer = np.flatnonzero(rank == r)
-                unions[group[layer]] |= words[codes[layer]]
+                unions[group[layer]] |= np.take(words, codes[layer], axis=0)
             scratch = np.arange(SPAN_CODES, SPAN_CODES + target.size)
-            words[scratch] = unions
+            words[SPAN_CODES : SPAN_CODES + target.size] = unions
             index[target] = scratch
         np.take(self.span_table, index, axis=0, out=out.reshape(-1, ROW_BYTES), mode="clip")
 
-    def _update_under(self, slots: np.ndarray, red: np.ndarray) -> None:
+    def _update_under(self, idx: Index, red: np.ndarray) -> None:
         """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
         feedback) with the hidden agent on top. A slot is rebuilt when its lit picture changed or the floor
         colour flips; an agent that moved or turned is erased (its rows copied back from the lit picture) and
         pasted again."""
-        ids = np.where(self.agent_hidden[slots], self._agent_ids(slots), -1)
-        key = (((ids + 1) * 128 + self.y[slots]) * 128 + self.x[slots]) * 2 + red  # what is drawn in the slot
-        old = self.under_key[slots]
+        # what is drawn in a slot, as one number: agent sprite id + 1 (0: none), its centre y and x, red floor
+        key = self.heading[idx] * (self.t[idx] > 0)  # the reset frame shows the agent facing up
+        key += self.agent_sprite0[idx] + 1
+        key *= self.agent_hidden[idx]
+        key <<= 7
+        key += self.y[idx]
+        key <<= 7
+        key += self.x[idx]
+        key <<= 1
+        key += red
+        old = self.under_key[idx]
         changed = np.flatnonzero(key != old)
         if not changed.size:
             return
-        slots, key, old, red, ids = slots[changed], key[changed], old[changed], red[changed], ids[changed]
+        slots, key, old, red = self.all_slots[idx][changed], key[changed], old[changed], red[changed]
         self.under_key[slots] = key
+        ids = (key >> 15) - 1
         n = self.num_envs
         lit_rows, under_rows = self.lit.view(ROW).reshape(-1), self.under.view(ROW).reshape(-1)
         source = red * n + slots  # the slots' lit pictures in ``lit`` seen as 2n pictures
         rebuild = (old < 0) | ((old ^ key) & 1).astype(bool)
         if rebuild.any():
             self.under[slots[rebuild]] = self.lit.reshape(-1, SCREEN, ROW_BYTES)[source[rebuild]]
-        erase = np.flatnonzero(~rebuild & (old >= 2 * 128 * 128))  # an agent was drawn: copy its rows back
+        erase = np.flatnonzero(~rebuild & (old >> 15 > 0))  # an agent was drawn: copy its rows back
         if erase.size:
-            old_id = old[erase] // (2 * 128 * 128) - 1
+            old_id = (old[erase] >> 15) - 1
             half = self.agent_sprites.heights[old_id] // 2
-            top = old[erase] // 256 % 128 - half
+            top = (old[erase] >> 8 & 127) - half
             height = int(self.agent_sprites.heights[old_id].max())
             rows = np.clip(top[:, None] + np.arange(height), 0, SCREEN - 1)
             under_rows[slots[erase, None] * SCREEN + rows] = lit_rows[source[erase, None] * SCREEN + rows]
@@ -1103,7 +1166,9 @@ class SearingSpotlightsCore(BatchedCore):
         alpha = self.alpha(slots)
         if alpha.any():
             dark = darken(lit, alpha[:, None, None])
-            blended = dark ^ ((dark ^ lit) & holes)
+            blended = np.bitwise_xor(dark, lit)  # the lit picture in the holes, the darkened one elsewhere
+            blended &= holes
+            blended ^= dark
             for i, k in enumerate(slots):
                 if self.rings[k]:
                     self._draw_rings(int(k), blended[i], lit[i])
