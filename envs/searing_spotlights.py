@@ -390,17 +390,14 @@ NEVER = np.iinfo(np.int64).max
 SCREEN_CENTRE = pygame.math.Vector2(CENTRE, CENTRE)
 
 
-def paste_centred(
-    sprite: Sprite, rows: np.ndarray, x: int, y: int, where: np.ndarray | None = None, centre: int | None = None
-) -> None:
-    """Paste ``sprite`` with its centre pixel on (x, y) into (..., 84, 252) rows, clipped (and masked by ``where``).
+def paste_centred(sprite: Sprite, rows: np.ndarray, x: int, y: int, centre: int | None = None) -> None:
+    """Paste ``sprite`` with its centre pixel on (x, y) into (..., 84, 252) rows, clipped.
 
     The centre is (height // 2, width // 2), or (centre, centre) when given (the coin's canvas is one px larger).
     """
     frames = rows.reshape(*rows.shape[:-1], SCREEN, 3)
-    mask = None if where is None else where.reshape(SCREEN, SCREEN, 3)
     top, left = (sprite.height // 2, sprite.width // 2) if centre is None else (centre, centre)
-    sprite.paste(frames, int(y) - top, int(x) - left, mask)
+    sprite.paste(frames, int(y) - top, int(x) - left)
 
 
 ALPHA_STEPS = 258  # the darkness alpha is constant after at most 256 increments
