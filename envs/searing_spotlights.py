@@ -6,19 +6,22 @@ coin after another, each within ``steps_per_coin`` steps. The agent, the coins a
 darkness by default, so they are seen only inside a spotlight (and in the first, still lit frames).
 
 How a frame is drawn, array-native across slots (frames are kept as (84, 252) byte rows). Most frames (darkness
-alpha 255, no spotlight rings) are "black everywhere, the lit picture inside the spotlight holes", so a frame is
-``hole_mask & lit`` where
+alpha 255, no spotlight rings) are "black everywhere, the picture under the darkness inside the spotlight holes",
+so a frame is ``hole_mask & under`` where
 
 * ``lit`` is kept per slot and changes only when a coin is taken or the exit opens: the floor plus the coins and
   the exit, in a blue and a red (hit) version;
-* ``hole_mask`` is gathered row by row from one table of 0/255 rows, one row per horizontal span ``[lo, hi]``:
-  every filled disc of pygame is a stack of such spans, so each spotlight contributes one table row per screen row,
-  and rows crossed by two or more spotlights are OR-ed in a few extra passes.
+* ``under`` is kept per slot too: the blue or red ``lit`` with the hidden agent on top. It is rebuilt when ``lit``
+  or the floor colour changes; an agent that moved or turned is erased (its rows copied back from ``lit``) and
+  pasted again, all slots in one scatter;
+* ``hole_mask`` is gathered row by row, straight into the frames, from one table of 0/255 rows, one row per
+  horizontal span ``[lo, hi]``: every filled disc of pygame is a stack of such spans, so each spotlight
+  contributes one table row per screen row. A screen row crossed by several spotlights points to a scratch table
+  row instead, the OR of its spans.
 
-The agent (drawn under the darkness too) is pasted, masked by the holes, only in the slots where it is near a hole,
-with one scatter for all of them. Frames with a partly transparent darkness (the first steps while the light dims,
-``light_threshold`` below 255) or with spotlight rings (``black_background``) blend the lit picture with the
-darkness using SDL's arithmetic, ``D + trunc((S - D) * A / 255)``. The HUD rows come from small row tables.
+Frames with a partly transparent darkness (the first steps while the light dims, ``light_threshold`` below 255)
+or with spotlight rings (``black_background``) blend ``under`` with the darkness using SDL's arithmetic,
+``D + trunc((S - D) * A / 255)``. The HUD rows come from small row tables.
 
 Mechanics per step are array operations as well: settings that depend only on the episode's options (velocities,
 bounds, the alpha of every step, draw orders) are derived once per distinct option set; whether the agent touches a
@@ -136,16 +139,6 @@ def floor_rows(kind: int, hit: bool) -> np.ndarray:
 
 
 @cache
-def agent_extent(scale: float) -> float:
-    """Distance from the agent sprites' centre pixel to their farthest opaque pixel (all eight headings)."""
-    extent = 0.0
-    for sprite in agent_sprites(scale):
-        ys, xs = np.nonzero(sprite.mask)
-        extent = max(extent, float(np.hypot(ys - sprite.height // 2, xs - sprite.width // 2).max()))
-    return extent
-
-
-@cache
 def coin_sprite(scale: float) -> Sprite:
     """A coin: a yellow disc with an orange rim of width int(2 * scale); width 0 makes pygame fill it orange."""
     radius = int(10 * scale)
@@ -187,6 +180,9 @@ def span_code(lo: np.ndarray | int, hi: np.ndarray | int) -> np.ndarray | int:
     return lo * (2 * SCREEN - 1 - lo) // 2 + hi + 1
 
 
+SPAN_CODES = span_code(SCREEN - 1, SCREEN - 1) + 1
+
+
 @cache
 def span_rows() -> np.ndarray:
     """One 0/255 row of 252 bytes per span code: 255 on the three channels of the pixels lo..hi."""
@@ -215,7 +211,7 @@ class HoleTables:
         self.width = 2 * reach + 1
         centres = np.arange(self.low, self.low + self.width)
         depth = 2 * max_radius
-        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.int16)
+        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.intp)
         self.rows = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.intp)
         for radius in range(1, max_radius + 1):
             mask, offset = disc_mask(radius)
@@ -244,8 +240,13 @@ def hole_tables(max_radius: int) -> HoleTables:
 # ------------------------------------------------------------------------------------------------ blending
 def darken(rows: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16)."""
-    product = rows.astype(np.uint16) * alpha.astype(np.uint16)
-    return (rows - ((product + 1 + (product >> 8)) >> 8)).astype(np.uint8)
+    product = rows.astype(np.uint16)
+    product *= np.asarray(alpha, np.uint16)
+    share = product >> 8  # in place from here: fewer passes over the frames
+    share += product
+    share += 1
+    share >>= 8  # floor(product / 255), exact for products up to 255 * 255
+    return rows - share.astype(np.uint8)
 
 
 def lighten(rows: np.ndarray, alpha: int) -> np.ndarray:
@@ -297,6 +298,28 @@ def hud_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------------------------------------ sampler
+def uniform(rng: np.random.Generator, low: float, high: float) -> float:
+    """``rng.uniform(low, high)`` (same value, same generator state) at a fraction of its cost: numpy computes
+    ``low + (high - low) * next_double``, and a double is the top 53 bits of the next 64-bit output, which PCG64
+    takes without touching a buffered 32-bit half (as ``random_raw`` does)."""
+    low, high = float(low), float(high)
+    return low + (high - low) * ((int(rng.bit_generator.random_raw()) >> 11) * (1.0 / 9007199254740992.0))
+
+
+@cache
+def orbit_points(radius: int) -> np.ndarray:
+    """Points at the angles 0..719 degrees on a spotlight's orbit (pygame's rotation, for the reference's floats).
+
+    Spotlights start, turn and end at angles ``start`` (0..359), ``start + 180 + (-45..44)`` and that plus
+    ``-135..134``, all within 0..719.
+    """
+    orbit = pygame.math.Vector2(SPOT_ORBIT + radius, 0)
+    points = [SCREEN_CENTRE + orbit.rotate(float(angle)) for angle in range(720)]
+    table = np.array([complex(point.x, point.y) for point in points])
+    table.setflags(write=False)
+    return table
+
+
 @cache
 def _block_disc(radius: int) -> np.ndarray:
     """Pixels at squared distance < radius^2 from the centre, as a (2r-1, 2r-1) mask."""
@@ -367,17 +390,14 @@ NEVER = np.iinfo(np.int64).max
 SCREEN_CENTRE = pygame.math.Vector2(CENTRE, CENTRE)
 
 
-def paste_centred(
-    sprite: Sprite, rows: np.ndarray, x: int, y: int, where: np.ndarray | None = None, centre: int | None = None
-) -> None:
-    """Paste ``sprite`` with its centre pixel on (x, y) into (..., 84, 252) rows, clipped (and masked by ``where``).
+def paste_centred(sprite: Sprite, rows: np.ndarray, x: int, y: int, centre: int | None = None) -> None:
+    """Paste ``sprite`` with its centre pixel on (x, y) into (..., 84, 252) rows, clipped.
 
     The centre is (height // 2, width // 2), or (centre, centre) when given (the coin's canvas is one px larger).
     """
     frames = rows.reshape(*rows.shape[:-1], SCREEN, 3)
-    mask = None if where is None else where.reshape(SCREEN, SCREEN, 3)
     top, left = (sprite.height // 2, sprite.width // 2) if centre is None else (centre, centre)
-    sprite.paste(frames, int(y) - top, int(x) - left, mask)
+    sprite.paste(frames, int(y) - top, int(x) - left)
 
 
 ALPHA_STEPS = 258  # the darkness alpha is constant after at most 256 increments
@@ -403,7 +423,6 @@ SETTINGS = np.dtype(
         ("vel", np.int64, (9, 2)),  # (dx, dy) per action code
         ("agent_radius", np.int64),
         ("agent_sprite0", np.int64),  # id of the heading-0 agent sprite in the core's SpriteScatter
-        ("agent_near", np.float64),  # agent sprite extent + 2.5 (hole raster and centre truncation); -1: visible
         ("max_health", np.float64),
         ("spot_damage", np.float64),
         ("reward_inside", np.float64),
@@ -439,7 +458,6 @@ SPOTS = np.dtype(
         ("radius", np.int64),
         ("base", np.intp),  # hole table offset of the radius
         ("reach", np.float64),  # hit distance: radius + agent radius
-        ("near", np.float64),  # distance within which the hole may overlap the (hidden) agent's sprite
         ("speed", np.float64),
         ("tau", np.float64),
         ("start", np.complex128),
@@ -491,7 +509,8 @@ class SearingSpotlightsCore(BatchedCore):
             gym.spaces.Box(np.zeros(4, np.float32), np.ones(4, np.float32), (4,), np.float32) if self.endless else None
         )
         super().__init__(num_envs, options)
-        self.resolve(None)  # cross-checks of the constructor options
+        self._defaults: dict[str, Any] | None = None
+        self._defaults = self.resolve(None)  # (cross-checks the constructor options) shared by default resets
         n = self.num_envs
         self.all_slots = np.arange(n)
         self.row_base = self.all_slots[:, None, None] * SCREEN  # first frame row of each slot
@@ -531,11 +550,19 @@ class SearingSpotlightsCore(BatchedCore):
         self.frame_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
         self.frames = self.frame_buffer[:n]
         self.lit = np.zeros((2, n, SCREEN, ROW_BYTES), np.uint8)  # floor + coins + exit; blue and red floor
-        self.holes = np.zeros((n * SCREEN, ROW_BYTES), np.uint8)  # 0/255 hole masks of the stepped slots
-        self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: the span code gathered into ``holes``
+        self.under_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
+        self.under = self.under_buffer[:n]  # what lies under the darkness: lit (blue or red) + hidden agent
+        self.under_key = np.full(n, -1, i64)  # what ``under`` shows (see ``_update_under``); -1: to rebuild
+        self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: its row of ``span_table``
+        # the span table, then scratch rows for frame rows crossed by several spans
+        self.span_table = np.zeros((SPAN_CODES + n * SCREEN, ROW_BYTES), np.uint8)
+        self.span_table[:SPAN_CODES] = span_rows()
+        self.span_words = self.span_table.view(np.uint32)  # the same rows as 63 words, for OR-ing
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
+        if not options and self._defaults is not None:  # (never modified: slots share it read-only)
+            return self._defaults
         opts = super().resolve(options)
         for low, high in (("spot_min_radius", "spot_max_radius"), ("spot_min_speed", "spot_max_speed")):
             if opts[low] > opts[high]:
@@ -544,7 +571,10 @@ class SearingSpotlightsCore(BatchedCore):
 
     def _episode_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
         """The settings record and draw orders for ``opts`` (cached: most episodes share their options)."""
-        key = tuple(tuple(v) if isinstance(v, list) else v for v in opts.values())
+        if opts is self._defaults:
+            key = None
+        else:
+            key = tuple(tuple(v) if isinstance(v, list) else v for v in opts.values())
         cached = self._settings_cache.get(key)
         if cached is None:
             if len(self._settings_cache) > 256:
@@ -562,9 +592,7 @@ class SearingSpotlightsCore(BatchedCore):
         record["pos_high"] = SCREEN - radius, SCREEN - radius
         vx, vy = continuous_velocity(ACTION_PAIRS, np.full(9, float(opts["agent_speed"])))
         record["vel"] = np.stack([vx, vy], axis=1)
-        extent = agent_extent(float(opts["agent_scale"]))
         record["agent_sprite0"] = self.agent_sprites.add(agent_sprites(float(opts["agent_scale"])))
-        record["agent_near"] = -1.0 if opts["agent_visible"] else extent + 2.5
         record["max_health"] = opts["agent_health"]
         record["spot_damage"] = opts["spot_damage"]
         record["reward_inside"] = opts["reward_inside_spotlight"]
@@ -615,7 +643,7 @@ class SearingSpotlightsCore(BatchedCore):
     def _unused_spot_record(self) -> np.void:
         record = np.zeros((), SPOTS)
         record["base"] = self.tables.base(0)
-        record["reach"] = record["near"] = -1.0
+        record["reach"] = -1.0
         record["start"] = record["target"] = record["offset"] = record["centre"] = complex(CENTRE, CENTRE)
         return record[()]
 
@@ -636,18 +664,14 @@ class SearingSpotlightsCore(BatchedCore):
     def _new_spot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> tuple:
         """A spotlight record: radius, speed, then the three angles (the reference's 5 draws, in its order)."""
         radius = int(rng.integers(opts["spot_min_radius"], opts["spot_max_radius"] + 1))
-        speed = rng.uniform(opts["spot_min_speed"], opts["spot_max_speed"])
-        start = rng.integers(0, 360)
-        target = start + 180 + rng.integers(-45, 45)
-        offset = target + rng.integers(-135, 135)
-        orbit = pygame.math.Vector2(SPOT_ORBIT + radius, 0)
-        points = []
-        for angle in (start, target, offset):  # pygame's rotation, for the reference's exact floats
-            point = SCREEN_CENTRE + orbit.rotate(float(angle))
-            points.append(complex(point.x, point.y))
+        speed = uniform(rng, opts["spot_min_speed"], opts["spot_max_speed"])
+        start = int(rng.integers(0, 360))
+        target = start + 180 + int(rng.integers(-45, 45))
+        offset = target + int(rng.integers(-135, 135))
+        points = orbit_points(radius)
+        start, target, offset = points[start], points[target], points[offset]
         reach = radius + float(self.agent_radius[k])
-        near = radius + float(self.agent_near[k]) if self.agent_near[k] >= 0 else -1.0
-        return (radius, self.tables.base(radius), reach, near, speed, 0.0, *points, points[0], False, True, False)
+        return (radius, self.tables.base(radius), reach, speed, 0.0, start, target, offset, start, False, True, False)
 
     def _append_spot(self, k: int) -> None:
         j = int(self.spot_count[k])
@@ -658,20 +682,65 @@ class SearingSpotlightsCore(BatchedCore):
         self.drawn_is_listed = False
 
     # --------------------------------------------------------------------------------------------- reset
-    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
-        record, self.orders[k] = self._episode_settings(opts)
-        self.settings[k] = record
+    def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
+        """New episodes with the same options: per-slot draws in the reference's order, the rest for all at once."""
+        record, orders = self._episode_settings(opts)
+        idx = np.array(slots, dtype=np.int64)
+        self.settings[idx] = record
+        for k in slots:
+            self.orders[k] = orders
         self._use_tables(int(opts["spot_max_radius"]))
-        self.t[k] = 0
-        self.end_t_now[k] = record["end_t"]
-        self.hit[k] = False
-        self.hud_red[k] = 0
-        self.next_spawn[k] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
-        self.spawns_left[k] = 0 if self.endless else opts["num_spawns"]
-        self.coins_collected[k] = self.success[k] = 0
-        self.coin_shown_until[k] = record["coin_show_duration"]
-        self.special_until[k] = NEVER if record["any_visible"] else self.coin_shown_until[k] if self.endless else 0
-        self.exit_open[k] = False
+        self.t[idx] = 0
+        self.end_t_now[idx] = record["end_t"]
+        self.hit[idx] = False
+        self.hud_red[idx] = 0
+        self.next_spawn[idx] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
+        self.spawns_left[idx] = 0 if self.endless else opts["num_spawns"]
+        self.coins_collected[idx] = 0
+        self.success[idx] = 0
+        self.coin_shown_until[idx] = record["coin_show_duration"]
+        shown = record["coin_show_duration"] if self.endless else 0
+        self.special_until[idx] = NEVER if record["any_visible"] else shown
+        self.exit_open[idx] = False
+        self.health[idx] = opts["agent_health"]
+        count = opts["initial_spawns"]
+        if count > self.spots.shape[1]:
+            self._grow_spots(max(count, 2 * self.spots.shape[1]))
+        self.spots[idx, count:] = self.unused_row[count:]
+        self.spot_count[idx] = count
+        self.drawn_is_listed = False
+        self.item_map[idx] = 0
+        if self.endless:
+            self.num_coins[idx] = self.coins_left[idx] = 1
+            self.end_t_now[idx] = min(record["end_t"], record["steps_per_coin"])
+        else:
+            most = max(opts["num_coins"], default=0)
+            if most > self.coin_x.shape[1]:
+                grow = ((0, 0), (0, most - self.coin_x.shape[1]))
+                self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
+                self.coin_alive = np.pad(self.coin_alive, grow)
+            self.coin_alive[idx] = False
+        spots = []
+        for k, rng in zip(slots, rngs, strict=True):
+            spots += self._draw_level(k, rng, opts)
+        if count:
+            self.spots[idx, :count] = np.array(spots, SPOTS).reshape(len(slots), count)
+        self.next_hud[idx] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
+        self.hud[idx] = reset_hud_row(
+            self.endless, bool(opts["show_last_action"]), bool(opts["show_last_positive_reward"])
+        )
+        for k in slots:
+            self._build_lit(k)
+        # the reset frames: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
+        self._update_under(idx, np.zeros(len(slots), bool))
+        out = np.empty((len(slots) + 1, SCREEN, ROW_BYTES), np.uint8)  # the frames and a scratch frame
+        alpha = int(record["alphas"][0])
+        out[:-1] = darken(self.under[idx], np.array(alpha)) if alpha else self.under[idx]
+        self._finish_frames(idx, out)
+        self.frames[idx] = out[:-1]
+
+    def _draw_level(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> list[tuple]:
+        """Slot k's agent, coins and exit, with the reference's draws in its order; returns the first spotlights."""
         mask = np.zeros((SCREEN, SCREEN), bool)
         self.heading[k] = int(rng.integers(0, 8))  # heading index (x 45 degrees): what rng.choice draws
         if opts["sample_agent_position"]:
@@ -681,62 +750,29 @@ class SearingSpotlightsCore(BatchedCore):
             x, y = CENTRE, CENTRE
             block_position(mask, x, y, ITEM_BLOCK)
         self.pos[k] = x, y
-        self.health[k] = opts["agent_health"]
-        count = opts["initial_spawns"]
-        if count > self.spots.shape[1]:
-            self._grow_spots(max(count, 2 * self.spots.shape[1]))
-        spots = self.spots[k]
-        spots[:count] = [self._new_spot(k, rng, opts) for _ in range(count)]
-        spots[count:] = self.unused_row[count:]
-        self.spot_count[k] = count
-        self.drawn_is_listed = False
-        self.item_map[k] = 0
+        spots = [self._new_spot(k, rng, opts) for _ in range(opts["initial_spawns"])]
         if self.endless:
-            self.num_coins[k] = self.coins_left[k] = 1
             self._spawn_endless_coin(k, rng, previous=None)
-            self.end_t_now[k] = min(record["end_t"], record["steps_per_coin"])
-        else:
-            counts = opts["num_coins"]
-            num_coins = int(counts[rng.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
-            self.num_coins[k] = self.coins_left[k] = num_coins
-            self.goal_without_exit[k] = not opts["use_exit"] and num_coins > 0
-            if num_coins > self.coin_x.shape[1]:
-                grow = ((0, 0), (0, num_coins - self.coin_x.shape[1]))
-                self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
-                self.coin_alive = np.pad(self.coin_alive, grow)
-            self.coin_alive[k] = False
-            for j in range(num_coins):
-                cx, cy = sample_position(mask, rng, ITEM_BLOCK)
-                cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
-                self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
-            if opts["use_exit"]:
-                ex, ey = sample_position(mask, rng, ITEM_BLOCK)
-                ex, ey = ex + int(rng.integers(2, 4)), ey + int(rng.integers(2, 4))
-                self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
-                if num_coins == 0:
-                    self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
-        self.next_hud[k] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
-        self.hud[k] = reset_hud_row(self.endless, *self._hud_flags(k))
-        self._build_lit(k)
-        # the reset frame: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
-        slot = np.array([k])
-        out = np.empty((2, SCREEN, ROW_BYTES), np.uint8)  # the frame and a scratch frame
-        out[0] = self.lit[0, k]
-        if self.agent_hidden[k]:
-            self._paste_agents(out, np.zeros(1, np.intp), slot)
-        alpha = int(self.alphas[k, 0])
-        if alpha:
-            out[0] = darken(out[0], np.array(alpha))
-        self._finish_frames(slot, out)
-        self.frames[k] = out[0]
+            return spots
+        counts = opts["num_coins"]
+        num_coins = int(counts[rng.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
+        self.num_coins[k] = self.coins_left[k] = num_coins
+        self.goal_without_exit[k] = not opts["use_exit"] and num_coins > 0
+        for j in range(num_coins):
+            cx, cy = sample_position(mask, rng, ITEM_BLOCK)
+            cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
+            self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
+        if opts["use_exit"]:
+            ex, ey = sample_position(mask, rng, ITEM_BLOCK)
+            ex, ey = ex + int(rng.integers(2, 4)), ey + int(rng.integers(2, 4))
+            self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
+            if num_coins == 0:
+                self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
+        return spots
 
     def alpha(self, slots: np.ndarray | int) -> np.ndarray:
         """The darkness alpha of the slots' current frames."""
         return self.alphas[slots, np.minimum(self.t[slots], ALPHA_STEPS - 1)]
-
-    def _hud_flags(self, k: int) -> tuple[bool, bool]:
-        flags = int(self.hud_flags27[k]) // 27
-        return bool(flags & 2), bool(flags & 1)
 
     def _place_coin(self, k: int, j: int, x: int, y: int) -> None:
         self.coin_x[k, j], self.coin_y[k, j] = x, y
@@ -872,8 +908,8 @@ class SearingSpotlightsCore(BatchedCore):
     def _spotlight_pass(self, idx: Index, pos: np.ndarray) -> tuple[np.ndarray, tuple]:
         """Draw (record), move and hit-test the spotlights; finished ones are removed when next visited.
 
-        Returns the per-slot hit flags and what the drawing needs: the centres, table offsets, the drawn
-        spotlights and those near the agent.
+        Returns the per-slot hit flags and what the drawing needs: the centres, table offsets and the drawn
+        spotlights.
         """
         spots = self.spots[idx]
         tau = spots["tau"]
@@ -884,7 +920,6 @@ class SearingSpotlightsCore(BatchedCore):
         dx, dy = delta.real, delta.imag
         distance = np.sqrt(dx * dx + dy * dy)
         hits = distance <= spots["reach"]
-        near = distance <= spots["near"]
         base = spots["base"]
         done = spots["done"]
         drawn = spots["listed"]
@@ -892,13 +927,15 @@ class SearingSpotlightsCore(BatchedCore):
         if done.any():  # (done is written below: ``removed`` and ``drawn`` are computed first)
             # The reference removes finished spotlights while iterating over its list, so the spotlight right
             # after a removed one is not visited in that step: not drawn, not moved, unable to hit.
-            visited = np.ones_like(drawn)
-            for j in range(1, drawn.shape[1]):
-                visited[:, j] = ~(visited[:, j - 1] & done[:, j - 1])
-            drawn = visited & drawn & ~done
-            removed = visited & done
+            drawn, removed = drawn.copy(), np.zeros_like(done)
+            for i in np.flatnonzero(done.any(axis=1)):
+                visited, skip = [], False
+                for finished in done[i].tolist():
+                    visited.append(not skip)
+                    skip = not skip and finished
+                drawn[i] &= visited & ~done[i]
+                removed[i] = visited & done[i]
             hits &= drawn
-            near &= drawn
             speed = spots["speed"] * drawn  # only the visited spotlights move
         else:
             speed = spots["speed"]
@@ -921,43 +958,39 @@ class SearingSpotlightsCore(BatchedCore):
         if removed is not None and removed.any():
             base = base.copy()  # a view of the arrays that the removal compacts
             self._remove_spots(idx, removed)
-        return hits.any(axis=1), (centre, base, drawn, near)
+        return hits.any(axis=1), (centre, base, drawn)
 
     def _remove_spots(self, idx: Index, removed: np.ndarray) -> None:
         """Compact the spotlight lists (keeping their order); freed positions get the unused values."""
-        spots = self.spots[idx]
-        keep = spots["listed"] & ~removed
+        local = np.flatnonzero(removed.any(axis=1))
+        slots = self.all_slots[idx][local]
+        spots = self.spots[slots]
+        keep = spots["listed"] & ~removed[local]
         order = np.argsort(~keep, axis=1, kind="stable")
         compacted = np.take_along_axis(spots, order, axis=1)
         count = keep.sum(axis=1)
         compacted[np.arange(compacted.shape[1])[None, :] >= count[:, None]] = self.unused_spot
-        self.spots[idx] = compacted
-        self.spot_count[idx] = count
+        self.spots[slots] = compacted
+        self.spot_count[slots] = count
 
     # ---------------------------------------------------------------------------------------------- draw
     def _draw(self, idx: Index, slots: np.ndarray, n: int, hit: np.ndarray, hud_code: np.ndarray, spots) -> None:
-        t = self.t[idx]
         """Compose the frames of the stepped slots (see the module docstring)."""
-        centre, base, drawn, near = spots
-        holes = self._hole_masks(n, centre, base, drawn)
-        buffer = self.frame_buffer if isinstance(idx, slice) else np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
+        self._update_under(idx, hit & self.red_feedback[idx])
+        full = isinstance(idx, slice)
+        buffer = self.frame_buffer if full else np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
         out = buffer[:n]
-        np.bitwise_and(holes, self.lit[0][idx], out=out)
+        self._hole_masks(out, *spots)
+        blend = np.flatnonzero(self.t[idx] < self.blend_until[idx])
+        holes = out[blend] if blend.size else None  # (a copy) the blended frames need their holes
+        np.bitwise_and(out, self.under[:n] if full else self.under[idx], out=out)
+        if blend.size:
+            self._blend_slots(slots[blend], blend, holes, out)
         self.hud[idx, ROW_BYTES // 2 :] = hud_tables()[1][hud_code]
         if hit.any():
-            for i in np.flatnonzero(hit & self.red_feedback[idx]):
-                out[i] = holes[i] & self.lit[1, slots[i]]
             self._paint_red(idx, slots, hud_code)
-        # the hidden agent shows where it overlaps a hole
-        fix = np.flatnonzero(near.any(axis=1))
-        if fix.size:
-            self._paste_agents(buffer, fix, slots[fix], where=holes)
-        blend = t < self.blend_until[idx]
-        if blend.any():
-            local = np.flatnonzero(blend)
-            self._blend_slots(slots[local], local, holes, buffer)
         self._finish_frames(idx, buffer)
-        if not isinstance(idx, slice):
+        if not full:
             self.frames[idx] = out
 
     def _paint_red(self, idx: Index, slots: np.ndarray, hud_code: np.ndarray) -> None:
@@ -972,62 +1005,107 @@ class SearingSpotlightsCore(BatchedCore):
                 bool(flags & 4), bool(flags & 2), bool(flags & 1), action, reward_state, int(red[i])
             )
 
-    def _hole_masks(self, n: int, centre: np.ndarray, base: np.ndarray, drawn: np.ndarray) -> np.ndarray:
-        """(n, 84, 252) 0/255 masks of this step's spotlight holes, gathered row by row from the span table.
+    def _hole_masks(self, out: np.ndarray, centre: np.ndarray, base: np.ndarray, drawn: np.ndarray) -> None:
+        """Write the 0/255 masks of this step's spotlight holes into ``out`` ((n, 84, 252)), gathered row by row.
 
         Each disc row writes its span code into its frame row; one gather from the span table then yields every
-        row. Rows crossed by several spotlights keep one code and OR the other spans in, one layer at a time.
+        row. A row crossed by several spotlights gets a scratch table row instead: the OR of all its spans.
         """
         tables = self.tables
-        if n > 4:  # many slots: only the drawn spotlights
-            local, j = np.nonzero(drawn)
-            centre, base = centre[local, j], base[local, j]
-            row_base = local[:, None] * SCREEN
-        else:
-            row_base = self.row_base[:n]
-        codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (..., disc rows)
-        rows = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
-        codes *= rows != 0
-        if n <= 4:
-            codes *= drawn[:, :, None]
-        keys = rows * (codes != 0)  # empty spans go to row 0 (under the HUD), where they cannot collide
-        keys += row_base
-        index = self.span_index[: n * SCREEN]
+        local, j = np.nonzero(drawn)
+        centre, base = centre[local, j], base[local, j]
+        codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (spotlights, disc rows)
+        keys = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
+        visible = (codes != 0) & (keys != 0)
+        codes *= visible
+        keys *= visible  # empty spans go to row 0 (under the HUD), where they cannot collide
+        keys += local[:, None] * SCREEN
+        keys, codes = keys.ravel(), codes.ravel()  # (flat intp arrays: several times faster to scatter)
+        index = self.span_index[: out.shape[0] * SCREEN]
         index.fill(0)
         index[keys] = codes
-        table = span_rows()
-        holes = self.holes[: n * SCREEN]
-        np.take(table, index, axis=0, out=holes, mode="clip")
-        pending = index[keys] != codes  # spans that lost their row to another one
-        if pending.any():
-            keys, codes = keys[pending], codes[pending]
-            hole_rows, table_rows = holes.view(ROW)[:, 0], table.view(ROW)[:, 0]
-            while keys.size:
-                index[keys] = codes
-                first = index[keys] == codes  # one span per row in this layer
-                target = keys[first]
-                merged = hole_rows[target].view(np.uint8) | table_rows[codes[first]].view(np.uint8)
-                hole_rows[target] = merged.view(ROW)
-                keys, codes = keys[~first], codes[~first]
-        return holes.reshape(n, SCREEN, ROW_BYTES)
+        lost = np.flatnonzero(index[keys] != codes)  # spans that lost their row to another one
+        if lost.size:
+            keys, codes = keys[lost], codes[lost]
+            order = np.argsort(keys, kind="stable")
+            keys, codes = keys[order], codes[order]
+            starts = np.empty(keys.size, bool)  # groups of lost spans, one per row
+            starts[0] = True
+            np.not_equal(keys[1:], keys[:-1], out=starts[1:])
+            first = np.flatnonzero(starts)
+            group = np.cumsum(starts) - 1
+            rank = np.arange(keys.size) - first[group]  # position in the group
+            target = keys[first]
+            words = self.span_words
+            unions = np.take(words, index[target], axis=0)  # the span that kept the row
+            unions |= np.take(words, codes[first], axis=0)
+            for r in range(1, int(rank.max()) + 1):  # a few layers (np.bitwise_or.reduceat is much slower)
+                layer = np.flatnonzero(rank == r)
+                unions[group[layer]] |= np.take(words, codes[layer], axis=0)
+            scratch = np.arange(SPAN_CODES, SPAN_CODES + target.size)
+            words[SPAN_CODES : SPAN_CODES + target.size] = unions
+            index[target] = scratch
+        np.take(self.span_table, index, axis=0, out=out.reshape(-1, ROW_BYTES), mode="clip")
 
-    def _paste_agents(self, frames: np.ndarray, local: np.ndarray, slots: np.ndarray, where=None) -> None:
-        """Paste the agents of ``slots`` into ``frames[local]`` (masked by ``where``, e.g. the holes)."""
-        heading = np.where(self.t[slots] > 0, self.heading[slots], 0)  # the reset frame shows it facing up
-        if len(slots) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
-            sprites = self.agent_sprites.sprites
-            for i, k, h in zip(local.tolist(), slots.tolist(), heading.tolist(), strict=True):
-                sprite = sprites[int(self.agent_sprite0[k]) + h]
-                paste_centred(sprite, frames[i], self.x[k], self.y[k], None if where is None else where[i])
+    def _update_under(self, idx: Index, red: np.ndarray) -> None:
+        """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
+        feedback) with the hidden agent on top. A slot is rebuilt when its lit picture changed or the floor
+        colour flips; an agent that moved or turned is erased (its rows copied back from the lit picture) and
+        pasted again."""
+        # what is drawn in a slot, as one number: agent sprite id + 1 (0: none), its centre y and x, red floor
+        key = self.heading[idx] * (self.t[idx] > 0)  # the reset frame shows the agent facing up
+        key += self.agent_sprite0[idx] + 1
+        key *= self.agent_hidden[idx]
+        key <<= 7
+        key += self.y[idx]
+        key <<= 7
+        key += self.x[idx]
+        key <<= 1
+        key += red
+        old = self.under_key[idx]
+        changed = np.flatnonzero(key != old)
+        if not changed.size:
             return
-        ids = self.agent_sprite0[slots] + heading
+        slots, key, old, red = self.all_slots[idx][changed], key[changed], old[changed], red[changed]
+        self.under_key[slots] = key
+        ids = (key >> 15) - 1
+        n = self.num_envs
+        lit_rows, under_rows = self.lit.view(ROW).reshape(-1), self.under.view(ROW).reshape(-1)
+        source = red * n + slots  # the slots' lit pictures in ``lit`` seen as 2n pictures
+        rebuild = (old < 0) | ((old ^ key) & 1).astype(bool)
+        if rebuild.any():
+            self.under[slots[rebuild]] = self.lit.reshape(-1, SCREEN, ROW_BYTES)[source[rebuild]]
+        erase = np.flatnonzero(~rebuild & (old >> 15 > 0))  # an agent was drawn: copy its rows back
+        if erase.size:
+            old_id = (old[erase] >> 15) - 1
+            half = self.agent_sprites.heights[old_id] // 2
+            top = (old[erase] >> 8 & 127) - half
+            height = int(self.agent_sprites.heights[old_id].max())
+            rows = np.clip(top[:, None] + np.arange(height), 0, SCREEN - 1)
+            under_rows[slots[erase, None] * SCREEN + rows] = lit_rows[source[erase, None] * SCREEN + rows]
+        paste = np.flatnonzero(ids >= 0)
+        if paste.size:
+            self._paste_agents(self.under_buffer, slots[paste], ids[paste], self.x[slots[paste]], self.y[slots[paste]])
+
+    def _paste_agents(self, frames: np.ndarray, local: np.ndarray, ids: np.ndarray, x: np.ndarray, y: np.ndarray):
+        """Paste agent sprites ``ids`` centred on (x, y) into ``frames[local]`` (a buffer ending with a spare frame)."""
+        if len(local) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
+            sprites = self.agent_sprites.sprites
+            for i, sprite_id, cx, cy in zip(local.tolist(), ids.tolist(), x.tolist(), y.tolist(), strict=True):
+                paste_centred(sprites[sprite_id], frames[i], cx, cy)
+            return
         half = self.agent_sprites.heights[ids] // 2  # square sprites, centred on the agent
         frames = frames.reshape(-1, SCREEN, SCREEN, 3)
-        self.agent_sprites.paste(frames, local, ids, self.y[slots] - half, self.x[slots] - half, True, where)
+        self.agent_sprites.paste(frames, local, ids, y - half, x - half, True)
+
+    def _agent_ids(self, slots: np.ndarray) -> np.ndarray:
+        """The agents' sprite ids in the current frames (the reset frame shows the agent facing up)."""
+        return self.agent_sprite0[slots] + (self.t[slots] > 0) * self.heading[slots]
 
     def _build_lit(self, k: int) -> None:
         """Slot k's lit pictures (blue and red floor) with its coins and exit, in the reference's order."""
         rows = self.lit[:, k]
+        self.under_key[k] = -1  # rebuild the picture under the darkness
         kind = int(self.floor_kind[k])
         rows[0] = floor_rows(kind, False)
         rows[1] = floor_rows(kind, bool(self.red_feedback[k]))
@@ -1042,7 +1120,8 @@ class SearingSpotlightsCore(BatchedCore):
     def _paste_entity(self, frames: np.ndarray, i: int, k: int, name: str) -> None:
         """Paste one entity of slot k into frame ``i`` of ``frames`` (a buffer ending with a scratch frame)."""
         if name == "agent":
-            self._paste_agents(frames, np.array([i]), np.array([k]))
+            slot = np.array([k])
+            self._paste_agents(frames, np.array([i]), self._agent_ids(slot), self.x[slot], self.y[slot])
         elif name == "coins":
             coin, radius = coin_sprite(float(self.coin_scale[k])), int(10 * self.coin_scale[k])
             for j in np.flatnonzero(self.coin_alive[k]):
@@ -1078,21 +1157,15 @@ class SearingSpotlightsCore(BatchedCore):
     def _blend_slots(self, slots: np.ndarray, local: np.ndarray, holes: np.ndarray, out: np.ndarray) -> None:
         """Frames with a partly transparent darkness or with spotlight rings: lit in the holes, blended elsewhere.
 
-        ``slots`` are slot numbers, ``local`` their frames in ``holes`` ((n, 84, 252) of 0/255) and in ``out``.
+        ``slots`` are slot numbers, ``holes`` their 0/255 hole masks and ``local`` their frames in ``out``.
         """
-        buffer = np.empty((len(slots) + 1, SCREEN, ROW_BYTES), np.uint8)  # with a scratch frame
-        lit = buffer[:-1]
-        np.take(self.lit[0], slots, axis=0, out=lit)
-        red = np.flatnonzero(self.hit[slots] & self.red_feedback[slots])
-        if red.size:
-            lit[red] = self.lit[1, slots[red]]
-        hidden = np.flatnonzero(self.agent_hidden[slots])
-        if hidden.size:
-            self._paste_agents(buffer, hidden, slots[hidden])
+        lit = self.under[slots]
         alpha = self.alpha(slots)
         if alpha.any():
             dark = darken(lit, alpha[:, None, None])
-            blended = dark ^ ((dark ^ lit) & holes[local])
+            blended = np.bitwise_xor(dark, lit)  # the lit picture in the holes, the darkened one elsewhere
+            blended &= holes
+            blended ^= dark
             for i, k in enumerate(slots):
                 if self.rings[k]:
                     self._draw_rings(int(k), blended[i], lit[i])
