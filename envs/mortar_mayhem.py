@@ -41,8 +41,7 @@ from envs.rng import BoundedDraws
 # The fixed command list (generation order), its tile offsets, and where each command sits in the one-hot vector.
 COMMANDS = ("right", "down", "left", "up", "stay", "right_down", "right_up", "left_down", "left_up")
 COMMAND_DELTAS = ((1, 0), (0, 1), (-1, 0), (0, -1), (0, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
-COMMAND_DX = np.array([dx for dx, _ in COMMAND_DELTAS], dtype=np.int64)
-COMMAND_DY = np.array([dy for _, dy in COMMAND_DELTAS], dtype=np.int64)
+COMMAND_STEP = np.array(COMMAND_DELTAS, dtype=np.int64)
 ONE_HOT_INDEX = (1, 4, 2, 3, 0, 5, 6, 7, 8)
 ICON_ANGLE = (0, 270, 180, 90, None, 315, 45, 225, 135)  # rotation of the right arrow; None = the "stay" sign
 MAX_VECTOR_COMMANDS = 20
@@ -80,19 +79,20 @@ def arena_picture(size: int, lethal_except: tuple[int, int] | None = None) -> np
 
 @cache
 def backgrounds() -> tuple[np.ndarray, np.ndarray]:
-    """Every arena picture, stacked, and the index of each: ``[size, 0, 0]`` all blue, ``[size, 1 + x, y]`` all red
-    but tile (x, y). Painting the backgrounds of many slots is then one gather."""
+    """Every arena picture, stacked, and the index of each: ``[size, 0, x, y]`` all blue (for any x, y),
+    ``[size, 1, x, y]`` all red but tile (x, y). Painting the backgrounds of many slots is then one gather."""
     pictures = []
-    index = np.full((ENDLESS_ARENA + 1, ENDLESS_ARENA + 1, ENDLESS_ARENA), -1, dtype=np.int64)
+    index = np.full((ENDLESS_ARENA + 1, 2, ENDLESS_ARENA, ENDLESS_ARENA), -1, dtype=np.int64)
     for size in range(2, ENDLESS_ARENA + 1):
-        index[size, 0, 0] = len(pictures)
+        index[size, 0] = len(pictures)
         pictures.append(arena_picture(size))
         for x in range(size):
             for y in range(size):
-                index[size, 1 + x, y] = len(pictures)
+                index[size, 1, x, y] = len(pictures)
                 pictures.append(arena_picture(size, (x, y)))
     stack = np.stack(pictures)
     stack.setflags(write=False)
+    index.setflags(write=False)
     return stack, index
 
 
@@ -292,6 +292,41 @@ def variant_name(grid: bool, vector_observation: bool, endless: bool) -> str:
 
 
 # ---------------------------------------------------------------------------------------------------------- core
+# The integer state of a slot, in one row per slot so that a reset writes a slot's whole state in one assignment;
+# each field is a view of its columns (pairs: x and y, or column and row). (name, columns, what it holds)
+SLOT_FIELDS = (
+    ("num_commands", 1, "commands of the episode (of the current round, endless)"),
+    ("allowed", 1, "the first k commands of the fixed list may be drawn"),
+    ("size", 1, "arena side in tiles"),
+    ("left", 1, "arena left/top edge in px"),
+    ("lethal_steps", 1, "E"),
+    ("act_steps", 1, "D"),
+    ("max_steps", 1, "endless: the episode ends when t == max_steps"),
+    ("grid_key", 1, "grid movement state (see grid_moves)"),
+    ("move_key", 2, "free movement keys, one per axis (see FreeMoves)"),
+    ("target", 2, "the tile the current command leads to"),
+    ("target_id", 1, "8 * column + row of the target, compared with the agent's tile id"),
+    ("current", 1, "checks so far in this round"),
+    ("timer", 1, "steps to the next check (safe tiles) or release (lethal tiles)"),
+    ("success", 1, "the last check is over"),
+    ("completed_total", 1, "passed checks over all rounds (endless)"),
+    ("t", 1, "steps so far (endless)"),
+    ("clue_pos", 1, "frame of the clue stream on screen"),
+    ("clue_left", 1, "clue frames still to come"),
+    ("stream_period", 1, "frames per command in the clue stream"),
+    ("stream_duration", 1, "frames per command that show its icon"),
+    ("debug_lag", 1, "the debug icon runs one frame ahead in the streams between rounds"),
+    ("background_id", 1, "the arena picture in its current colours (index into backgrounds())"),
+    ("shown", 6, "what the frame shows: background id, agent x, y, sprite and sheet, icon (-1 none)"),
+    ("pos", 2, "agent centre in px"),
+    ("sprite", 1, "agent sprite index (heading // 45)"),
+    ("sheet_id", 1, "agent sprite sheet (agent_scale)"),  # pos, sprite, sheet_id last: `drawn` copies them
+)
+SLOT_COLUMNS = {name: sum(width for _, width, _ in SLOT_FIELDS[:i]) for i, (name, _, _) in enumerate(SLOT_FIELDS)}
+SLOT_WIDTH = sum(width for _, width, _ in SLOT_FIELDS)
+AGENT_COLUMNS = slice(SLOT_COLUMNS["pos"], SLOT_WIDTH)  # (x, y, sprite, sheet)
+
+
 class MortarMayhemCore(BatchedCore):
     """All Mortar Mayhem variants, batched over ``num_envs`` slots.
 
@@ -333,55 +368,28 @@ class MortarMayhemCore(BatchedCore):
         self._allocate(self.num_envs)
 
     def _allocate(self, n: int) -> None:
-        i64 = np.int64
         self.frames = np.zeros((n, SCREEN, SCREEN, 3), dtype=np.uint8)
         self.frames_rows = self.frames.reshape(n, SCREEN, SCREEN * 3)  # a sprite row is one contiguous byte run
         self.vector = np.zeros((n, MAX_VECTOR_COMMANDS * 9), dtype=np.float32)
         self.backgrounds, self.background_index = backgrounds()
-        # black screen + arena in its current colours (a per-slot copy: copying it is cheaper than gathering)
-        self.background = np.zeros_like(self.frames)
-        # level and parameters of each slot's episode
-        self.size = np.zeros(n, i64)
-        self.left = np.zeros(n, i64)  # arena left/top edge in px
-        self.sheet_id = np.zeros(n, i64)  # agent sprite sheet (agent_scale) of the slot
-        self.commands = np.zeros((n, 16), i64)
-        self.num_commands = np.zeros(n, i64)
-        self.allowed = np.zeros(n, i64)
-        self.lethal_steps = np.ones(n, i64)  # E
-        self.act_steps = np.ones(n, i64)  # D
-        self.max_steps = np.zeros(n, i64)
+        self.slot_state = np.zeros((n, SLOT_WIDTH), dtype=np.int64)
+        for name, width, _ in SLOT_FIELDS:
+            start = SLOT_COLUMNS[name]
+            setattr(self, name, self.slot_state[:, start] if width == 1 else self.slot_state[:, start : start + width])
+        self.shown[:] = -1  # nothing drawn yet
+        self.commands = np.zeros((n, 16), np.int64)
         self.reward_failure = np.zeros(n)
         self.reward_success = np.zeros(n)
         self.reward_episode = np.zeros(n)
         self.visual_feedback = np.ones(n, bool)
-        # agent: movement keys (free: one per axis; grid: one state), centre in px and sprite index (heading // 45)
-        self.move_key = np.zeros((n, 2), i64)
-        self.grid_key = np.zeros(n, i64)
-        self.pos = np.zeros((n, 2), i64)
-        self.sprite = np.zeros(n, i64)
-        # the act phase
-        self.target = np.zeros((n, 2), i64)
-        self.target_id = np.zeros(n, i64)  # 8 * column + row, compared with the agent's tile id
-        self.current = np.zeros(n, i64)  # checks so far in this round
-        self.timer = np.zeros(n, i64)  # steps to the next check (safe tiles) or release (lethal tiles)
         self.tiles_on = np.zeros(n, bool)
-        self.success = np.zeros(n, i64)
-        self.completed_total = np.zeros(n, i64)  # passed checks over all rounds (endless)
-        self.t = np.zeros(n, i64)
         # clue stream: the icon (command, or -1 for a blank frame) of every frame; `clue_pos` is the frame on screen
-        self.stream = np.full((n, 64), -1, i64)
-        self.clue_pos = np.zeros(n, i64)
-        self.clue_left = np.zeros(n, i64)  # frames still to come
-        self.stream_period = np.ones(n, i64)
-        self.stream_duration = np.zeros(n, i64)
-        self.debug_lag = np.zeros(n, i64)  # the debug icon runs one frame ahead in the streams between rounds
+        self.stream = np.full((n, 64), -1, np.int64)
         # The reference caches the sprite (and rect) it drew last, and after a reset still shows it in the debug
         # view and, in the endless variant, during the first clue stream. ``stale``: the slot shows that sprite
-        # (`drawn_*`, valid once anything was drawn) instead of its agent. It is set at reset and cleared by the
-        # first step that draws the agent.
-        self.drawn_pos = np.zeros((n, 2), i64)
-        self.drawn_sprite = np.zeros(n, i64)
-        self.drawn_sheet = np.zeros(n, i64)
+        # (``drawn``: x, y, sprite, sheet; valid once anything was drawn) instead of its agent. It is set at reset
+        # and cleared by the first step that draws the agent.
+        self.drawn = np.zeros((n, 4), np.int64)
         self.drawn_valid = np.zeros(n, bool)
         self.stale = np.zeros(n, bool)
         self._rng_seen: list[np.random.Generator | None] = [None] * n  # the generator of each slot's last reset
@@ -413,10 +421,17 @@ class MortarMayhemCore(BatchedCore):
         return self.target[:, 1]
 
     # ------------------------------------------------------------------------------------------------ reset
-    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
+    def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
+        """Build the levels of ``slots`` and draw their first frames. Each slot's draws run in the reference's
+        order and its state is gathered into one row; then all the rows, commands and frames are written at once."""
+        if len(set(slots)) < len(slots):  # a slot reset twice in one call: only its last level may remain
+            for k, rng in zip(slots, rngs, strict=True):
+                self._reset_slots([k], [rng], opts)
+            return
         size = ENDLESS_ARENA if self.endless else opts["arena_size"]
         left = arena_left(size)
         allowed = opts["allowed_commands"]
+        max_steps = opts.get("max_steps", -1)
         count_list = opts.get("command_count", [opts.get("initial_command_count")])
         lists = [opts["explosion_duration"], opts["explosion_delay"]]
         if self.clue_phase:
@@ -427,82 +442,91 @@ class MortarMayhemCore(BatchedCore):
         words = 1 + 2 * self.spawn_jitter + (len(count_list) > 1)
         if len(count_list) == 1:
             words += count_list[0] + choices
-        draws = BoundedDraws(rng, words, fresh=rng is not self._rng_seen[k])  # a new generator has drawn nothing
-        self._rng_seen[k] = rng
-        tile = draws.below(size * size)
-        x, y = left + TILE * (tile // size) + TILE // 2, left + TILE * (tile % size) + TILE // 2
-        if self.spawn_jitter:
-            x, y = x + draws.below(4) - 2, y + draws.below(4) - 2
-        start_x, start_y = (x - left) // TILE, (y - left) // TILE
-        count = int(count_list[draws.below(len(count_list))]) if not self.endless else count_list[0]
-        if len(count_list) > 1:
-            draws.reserve(count + choices)
-        if self.endless:  # uniform over the allowed commands, no validity filter (the targets wrap)
-            commands = [draws.below(allowed) for _ in range(count)]
-        else:  # a walk that stays inside the arena
-            walk = command_walk(size, allowed)
-            commands, tile = [], start_x * size + start_y
-            for _ in range(count):
-                valid, leads_to = walk[tile]
-                pick = draws.below(len(valid))
-                commands.append(valid[pick])
-                tile = leads_to[pick]
-        picks = [int(values[draws.below(len(values))]) for values in lists]
-        draws.close()
-        duration, delay = picks[:2] if self.clue_phase else (0, 0)
-        lethal_steps, act_steps = picks[-2:]
-
-        if not self.stale[k]:  # the sprite drawn last is this slot's agent: keep it for the quirks above
-            self.drawn_pos[k], self.drawn_sprite[k], self.drawn_sheet[k] = self.pos[k], self.sprite[k], self.sheet_id[k]
-        self.stale[k] = True
-        self._ensure_commands(count)
-        self.commands[k, :count] = commands
-        self.num_commands[k], self.allowed[k] = count, allowed
-        self.size[k], self.left[k] = size, left
-        self.lethal_steps[k], self.act_steps[k] = lethal_steps, act_steps
-        self.max_steps[k] = opts.get("max_steps", -1)
-        self.reward_failure[k] = opts["reward_command_failure"]
-        self.reward_success[k] = opts["reward_command_success"]
-        self.reward_episode[k] = opts.get("reward_episode_success", 0.0)
-        self.visual_feedback[k] = opts["visual_feedback"]
-        scale = AGENT_SCALE if self.grid else opts["agent_scale"]
-        self.sheet_id[k] = self._sheet_for(scale)
-        if self.grid:
-            self.grid_key[k] = self._grid_moves[4][size] + (start_x * size + start_y) * 4
-        else:
-            radius = int(25 * scale)
+        walk = None if self.endless else command_walk(size, allowed)
+        sheet = self._sheet_for(AGENT_SCALE if self.grid else opts["agent_scale"])
+        grid_base = self._grid_moves[4][size]
+        if not self.grid:
+            radius = int(25 * self._sheet_scales[sheet])
             config = (opts["agent_speed"], radius, 0 if self.endless else left, left + TILE * size, self.endless)
-            self.move_key[k] = self._free_moves.key(config, x, y)
-        self.pos[k] = x, y
-        self.sprite[k] = 0
-        tx, ty = start_x + COMMAND_DELTAS[commands[0]][0], start_y + COMMAND_DELTAS[commands[0]][1]
-        if self.endless:
-            tx, ty = tx % size, ty % size
-        self.target[k] = tx, ty
-        self.target_id[k] = 8 * tx + ty
-        self.current[k] = 0
-        self.timer[k] = act_steps  # the first act step is not a check (the reference's step counter starts at 0)
-        self.tiles_on[k] = False
-        self.success[k] = self.completed_total[k] = self.t[k] = 0
-        period = duration + delay
-        length = count * period
-        self._ensure_stream(length)
+        background = int(self.background_index[size, 0, 0, 0])
+        rows, commands, vector_ones, streams = [], [], [], []
+        for k, rng in zip(slots, rngs, strict=True):
+            draws = BoundedDraws(rng, words, fresh=rng is not self._rng_seen[k])  # a new generator has drawn nothing
+            self._rng_seen[k] = rng
+            tile = draws.below(size * size)
+            start_x, start_y = divmod(tile, size)  # the spawn tile (the jitter keeps the centre inside it)
+            x, y = left + TILE * start_x + TILE // 2, left + TILE * start_y + TILE // 2
+            if self.spawn_jitter:
+                x, y = x + draws.below(4) - 2, y + draws.below(4) - 2
+            count = int(count_list[draws.below(len(count_list))]) if not self.endless else count_list[0]
+            if len(count_list) > 1:
+                draws.reserve(count + choices)
+            if walk is None:  # endless: uniform over the allowed commands, no validity filter (the targets wrap)
+                walked = [draws.below(allowed) for _ in range(count)]
+            else:  # a walk that stays inside the arena
+                walked, tile = [], start_x * size + start_y
+                for _ in range(count):
+                    valid, leads_to = walk[tile]
+                    pick = draws.below(len(valid))
+                    walked.append(valid[pick])
+                    tile = leads_to[pick]
+            picks = [int(values[draws.below(len(values))]) for values in lists]
+            draws.close()
+            duration, delay = picks[:2] if self.clue_phase else (0, 0)
+            lethal_steps, act_steps = picks[-2:]
+
+            dx, dy = COMMAND_DELTAS[walked[0]]
+            tx, ty = start_x + dx, start_y + dy
+            if self.endless:
+                tx, ty = tx % size, ty % size
+            move = (0, 0) if self.grid else self._free_moves.key(config, x, y)
+            period = duration + delay
+            length = count * period
+            icon = walked[0] if duration else -1
+            # the fields of SLOT_FIELDS, in order; the first act step is not a check (the reference's step counter
+            # starts at 0), and the reset frame shows the clue stream's first frame
+            rows.append(
+                [count, allowed, size, left, lethal_steps, act_steps, max_steps]
+                + [grid_base + (start_x * size + start_y) * 4, *move, tx, ty, 8 * tx + ty]
+                + [0, act_steps, 0, 0, 0, 0, max(length - 1, 0), max(period, 1), duration, 0]
+                + [background, background, x, y, 0, sheet, icon, x, y, 0, sheet]
+            )
+            commands.append(walked)
+            if self.vector_observation:
+                base = k * self.vector.shape[1]
+                vector_ones += [base + 9 * c + ONE_HOT_INDEX[command] for c, command in enumerate(walked)]
+            if self.clue_phase:
+                streams.append([c for command in walked for c in [command] * duration + [-1] * delay])
+
+        ks = np.array(slots, dtype=np.int64)
+        fresh_drawing = ks[~self.stale[ks]]  # the sprite drawn last is this slot's agent: keep it (see the module doc)
+        self.drawn[fresh_drawing] = self.slot_state[fresh_drawing, AGENT_COLUMNS]
+        self.stale[ks] = True
+        self.slot_state[ks] = rows
+        width = max(len(walked) for walked in commands)
+        self._ensure_commands(width)
+        if any(len(walked) < width for walked in commands):  # padded; commands past a slot's count are never read
+            commands = [walked + [0] * (width - len(walked)) for walked in commands]
+        self.commands[ks, :width] = commands
+        self.reward_failure[ks] = opts["reward_command_failure"]
+        self.reward_success[ks] = opts["reward_command_success"]
+        self.reward_episode[ks] = opts.get("reward_episode_success", 0.0)
+        self.visual_feedback[ks] = opts["visual_feedback"]
+        self.tiles_on[ks] = False
         if self.clue_phase:
-            self.stream[k, :length] = [c for command in commands for c in [command] * duration + [-1] * delay]
-        self.clue_pos[k] = 0
-        self.clue_left[k] = max(length - 1, 0)  # the reset frame shows the stream's first frame
-        self.stream_period[k], self.stream_duration[k] = max(period, 1), duration
-        self.debug_lag[k] = 0
+            self._ensure_stream(max(len(stream) for stream in streams))
+            for k, stream in zip(slots, streams, strict=True):
+                self.stream[k, : len(stream)] = stream
         if self.vector_observation:
-            vector = self.vector[k]
-            vector[:] = 0.0
-            vector[[9 * c + ONE_HOT_INDEX[command] for c, command in enumerate(commands)]] = 1.0
-        self.background[k] = self.backgrounds[self.background_index[size, 0, 0]]
-        self.frames[k] = self.background[k]
-        rows = self.frames_rows[k]
-        self._sheets[self.sheet_id[k]].paste_one(rows, y, x, 0)  # the new agent, facing up
-        if self.clue_phase and duration:
-            icon_sheet().paste_one(rows, ICON_CORNER, ICON_CORNER, commands[0])
+            self.vector[ks] = 0.0
+            self.vector.reshape(-1)[vector_ones] = 1.0
+        self.frames[ks] = self.backgrounds[background]
+        shown = self.shown[ks]
+        self._sheets[sheet].paste(self.frames_rows, ks, shown[:, 2], shown[:, 1], shown[:, 3])  # facing up
+        icon = shown[:, 5] >= 0
+        if icon.any():
+            corner = np.full(int(icon.sum()), ICON_CORNER)
+            icon_sheet().paste(self.frames_rows, ks[icon], corner, corner, shown[icon, 5])
 
     def _ensure_commands(self, count: int) -> None:
         if count > self.commands.shape[1]:
@@ -525,13 +549,17 @@ class MortarMayhemCore(BatchedCore):
         if stale.any():
             self._first_step(slots[stale])
         clue_slots = slots[:0]
+        icons = None  # the icon of every stepped slot (-1: none); None: no icon anywhere
         if self.clue_phase:
             clue = self.clue_left[idx] > 0
             if clue.any():
                 clue_slots = slots if clue.all() else slots[clue]
                 # the next frame of the command stream; the agent is frozen and the action ignored
-                self.clue_pos[clue_slots] += 1
+                clue_pos = self.clue_pos[clue_slots] + 1
+                self.clue_pos[clue_slots] = clue_pos
                 self.clue_left[clue_slots] -= 1
+                icons = np.full(len(slots), -1)
+                icons[clue] = self.stream[clue_slots, clue_pos]
         if not len(clue_slots):
             rewards, terminated = self._act(idx, actions)
         else:
@@ -543,13 +571,12 @@ class MortarMayhemCore(BatchedCore):
             self.t[idx] += 1
             terminated |= self.t[idx] == self.max_steps[idx]
         drawn = slice(None) if isinstance(idx, slice) else slots
-        pos, sprite, sheet = self.pos[drawn], self.sprite[drawn], self.sheet_id[drawn]
+        agents = self.slot_state[drawn, AGENT_COLUMNS]  # x, y, sprite, sheet (a view when `drawn` is a slice)
         stale = self.stale[drawn] if self.endless else None  # only the endless clue keeps a stale sprite on screen
         if stale is not None and stale.any():  # the stream after a reset shows the sprite of an earlier episode
-            pos, sprite, sheet = pos.copy(), sprite.copy(), sheet.copy()
-            ks = slots[stale]
-            pos[stale], sprite[stale], sheet[stale] = self.drawn_pos[ks], self.drawn_sprite[ks], self.drawn_sheet[ks]
-        self._compose(drawn, slots, pos, sprite, sheet, clue_slots)
+            agents = agents.copy()
+            agents[stale] = self.drawn[slots[stale]]
+        self._compose(drawn, slots, agents, icons)
         return rewards, terminated
 
     def _first_step(self, ks: np.ndarray) -> None:
@@ -632,7 +659,7 @@ class MortarMayhemCore(BatchedCore):
         current = self.current[ks]
         more = current < self.num_commands[ks]
         command = self.commands[ks, np.minimum(current, self.commands.shape[1] - 1)]
-        target = self.target[ks] + np.where(more[:, None], np.stack([COMMAND_DX[command], COMMAND_DY[command]], 1), 0)
+        target = self.target[ks] + COMMAND_STEP[command] * more[:, None]
         if self.endless:
             target %= ENDLESS_ARENA
         self.target[ks] = target
@@ -658,42 +685,43 @@ class MortarMayhemCore(BatchedCore):
         """Backgrounds of slots whose tiles changed colour: all red but the target, or all blue."""
         red = self.tiles_on[ks] & self.visual_feedback[ks]
         target = self.target[ks]
-        which = self.background_index[self.size[ks], np.where(red, 1 + target[:, 0], 0), np.where(red, target[:, 1], 0)]
-        self.background[ks] = self.backgrounds[which]
+        self.background_id[ks] = self.background_index[self.size[ks], red.view(np.uint8), target[:, 0], target[:, 1]]
 
-    def _compose(
-        self,
-        sel: Index,
-        slots: np.ndarray,
-        pos: np.ndarray,
-        sprite: np.ndarray,
-        sheet_ids: np.ndarray,
-        icon_slots: np.ndarray,
-    ) -> None:
-        """Frames of ``slots`` (= ``sel`` as an index): background, the agent sprite, and the icon of clue slots."""
-        self.frames[sel] = self.background[sel]
+    def _compose(self, sel: Index, slots: np.ndarray, agents: np.ndarray, icons: np.ndarray | None) -> None:
+        """Frames of ``slots`` (= ``sel`` as an index): background, the agent sprite (``agents``: x, y, sprite, sheet)
+        and the icon (``icons``, -1 for none). Only frames whose picture changed are drawn again."""
+        shown = np.empty((len(slots), 6), dtype=np.int64)
+        shown[:, 0] = self.background_id[sel]
+        shown[:, 1:5] = agents
+        shown[:, 5] = -1 if icons is None else icons
+        changed = (shown != self.shown[sel]).any(axis=1)
+        if not changed.any():
+            return
+        if not changed.all():
+            slots, shown = slots[changed], shown[changed]
+        self.shown[slots] = shown
+        self.frames[slots] = self.backgrounds[shown[:, 0]]
+        x, y, sprite, sheet_ids = shown[:, 1], shown[:, 2], shown[:, 3], shown[:, 4]
         if len(self._sheets) == 1:
-            self._sheets[0].paste(self.frames_rows, slots, pos[:, 1], pos[:, 0], sprite)
+            self._sheets[0].paste(self.frames_rows, slots, y, x, sprite)
         else:
             for s in np.unique(sheet_ids):
                 mine = sheet_ids == s
-                self._sheets[s].paste(self.frames_rows, slots[mine], pos[mine, 1], pos[mine, 0], sprite[mine])
-        if len(icon_slots):
-            icons = self.stream[icon_slots, self.clue_pos[icon_slots]]
-            shown = icons >= 0
-            if shown.any():
-                ks = icon_slots[shown]
-                corner = np.full(len(ks), ICON_CORNER)
-                icon_sheet().paste(self.frames_rows, ks, corner, corner, icons[shown])
+                self._sheets[s].paste(self.frames_rows, slots[mine], y[mine], x[mine], sprite[mine])
+        icon = shown[:, 5] >= 0
+        if icon.any():
+            ks = slots[icon]
+            corner = np.full(len(ks), ICON_CORNER)
+            icon_sheet().paste(self.frames_rows, ks, corner, corner, shown[icon, 5])
 
     def _debug_frame(self, k: int) -> np.ndarray:
-        frame = self.background[k].copy()
+        frame = self.backgrounds[self.background_id[k]].copy()
         rows = frame.reshape(1, SCREEN, SCREEN * 3)
         zero = np.zeros(1, dtype=np.int64)
         if self.stale[k] and self.drawn_valid[k]:
-            (x, y), sprite, sheet = self.drawn_pos[k], self.drawn_sprite[k], self.drawn_sheet[k]
+            x, y, sprite, sheet = self.drawn[k]
         else:
-            (x, y), sprite, sheet = self.pos[k], self.sprite[k], self.sheet_id[k]
+            x, y, sprite, sheet = self.slot_state[k, AGENT_COLUMNS]
         self._sheets[sheet].paste(rows, zero, zero + y, zero + x, zero + sprite)
         if self.clue_left[k] > 0:  # the reference's render keeps its own copy of the stream (see the module doc)
             command = self.stream[k, self.clue_pos[k] + self.debug_lag[k]]

@@ -48,11 +48,20 @@ def check_batched_equals_singles(
                 episodes += 1
                 singles[k].reset_slot(0, options=options[k % len(options)])
         reset_batched(live[terminated].tolist(), [None] * int(terminated.sum()))  # the generators continue
-        np.testing.assert_array_equal(batched.observations(), np.stack([s.observations()[0] for s in singles]))
+        assert_observations_equal(batched.observations(), [s.observations() for s in singles])
         if t % 25 == 0:
             for k in range(n):
                 np.testing.assert_array_equal(batched.debug_frame(k), singles[k].debug_frame(0))
     return singles, episodes
+
+
+def assert_observations_equal(batched: Any, singles: list[Any]) -> None:
+    """Observations of all slots of a batched core equal those of the one-slot cores (arrays or dicts of arrays)."""
+    if isinstance(batched, dict):
+        for key, value in batched.items():
+            np.testing.assert_array_equal(value, np.stack([single[key][0] for single in singles]), err_msg=key)
+    else:
+        np.testing.assert_array_equal(batched, np.stack([single[0] for single in singles]))
 
 
 def check_vector_env_matches_singles(

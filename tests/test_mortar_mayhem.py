@@ -7,8 +7,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import envs  # noqa: F401  (registers the ids)
+import envs
 from envs.mortar_mayhem import MortarMayhemCore
+from tests.batching import check_batched_equals_singles
 
 MM, MM_GRID, MMB, MMB_GRID, EMM = (
     "MortarMayhem-v0",
@@ -479,3 +480,52 @@ def test_random_play_statistics_match_the_reference() -> None:
             completed.append(info["commands_completed"])
         got = (min(lengths), np.mean(lengths), max(lengths), np.mean(returns), np.mean(completed))
         assert got == pytest.approx(expected, abs=1e-9), env_id
+
+
+# ------------------------------------------------------------------------------------------------- batching
+BATCH_OPTIONS = {
+    MM: [
+        {},
+        {"command_count": [2, 5, 9], "command_show_duration": [1, 3], "command_show_delay": [0, 2]},
+        {"agent_scale": 0.3, "visual_feedback": False},
+        {"arena_size": 3, "explosion_delay": [4, 7], "explosion_duration": [1, 3]},
+    ],
+    MM_GRID: [{}, {"command_count": [1, 4], "arena_size": 2, "allowed_commands": 9, "explosion_delay": [3, 5]}],
+    MMB: [{}, {"command_count": [3, 20]}, {"agent_scale": 0.5}],
+    MMB_GRID: [{}],  # all six slots reset in one call at the start (the windowed sprite paste)
+    EMM: [{}, {"initial_command_count": 2, "max_steps": 150}, {"agent_scale": 0.2}],
+}
+
+
+def oracle_or_random(rng: np.random.Generator, cores: list[MortarMayhemCore]) -> np.ndarray:
+    """Mostly the oracle (so that checks pass and rounds go on), sometimes a random action (so that episodes end)."""
+    space = cores[0].single_action_space
+    high = space.nvec if isinstance(space, gym.spaces.MultiDiscrete) else space.n
+    actions = [oracle(core) if rng.random() < 0.95 else rng.integers(0, high) for core in cores]
+    return np.array(actions, dtype=np.int64)
+
+
+@pytest.mark.parametrize("env_id", [*FINITE, EMM])
+def test_batched_slots_equal_single_environments(env_id: str) -> None:
+    """A 6-slot core (all slots at once, or a few at a time; finished slots reset together) equals six 1-slot cores,
+    frames and debug views, with option sets that vary the command counts, timings and agent scales per slot."""
+    longest = [0]
+
+    def choose(rng: np.random.Generator, cores: list[MortarMayhemCore]) -> np.ndarray:
+        longest[0] = max(longest[0], *(int(core.num_commands[0]) for core in cores))
+        return oracle_or_random(rng, cores)
+
+    _, episodes = check_batched_equals_singles(env_id, BATCH_OPTIONS[env_id], 400, choose)
+    assert episodes >= 6
+    if env_id == EMM:
+        assert longest[0] > 3, longest  # rounds went on, so commands were appended during the steps
+
+
+def test_reset_slots_with_a_repeated_slot_keeps_its_last_level() -> None:
+    together, one_by_one = envs.make_core(MMB_GRID, num_envs=3), envs.make_core(MMB_GRID, num_envs=3)
+    together.reset_slots([0, 2, 1, 2], [5, 6, 7, 8])
+    for k, seed in [(0, 5), (2, 6), (1, 7), (2, 8)]:
+        one_by_one.reset_slot(k, seed)
+    np.testing.assert_array_equal(together.frames, one_by_one.frames)
+    np.testing.assert_array_equal(together.vector, one_by_one.vector)
+    np.testing.assert_array_equal(together.target, one_by_one.target)
