@@ -558,6 +558,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.span_table = np.zeros((SPAN_CODES + n * SCREEN, ROW_BYTES), np.uint8)
         self.span_table[:SPAN_CODES] = span_rows()
         self.span_words = self.span_table.view(np.uint32)  # the same rows as 63 words, for OR-ing
+        self.span_claim = np.zeros(n * SCREEN, np.intp)  # scratch for ``_merge_lost_spans``
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
@@ -1026,26 +1027,37 @@ class SearingSpotlightsCore(BatchedCore):
         index[keys] = codes
         lost = np.flatnonzero(index[keys] != codes)  # spans that lost their row to another one
         if lost.size:
-            keys, codes = keys[lost], codes[lost]
-            order = np.argsort(keys, kind="stable")
-            keys, codes = keys[order], codes[order]
-            starts = np.empty(keys.size, bool)  # groups of lost spans, one per row
-            starts[0] = True
-            np.not_equal(keys[1:], keys[:-1], out=starts[1:])
-            first = np.flatnonzero(starts)
-            group = np.cumsum(starts) - 1
-            rank = np.arange(keys.size) - first[group]  # position in the group
-            target = keys[first]
-            words = self.span_words
-            unions = np.take(words, index[target], axis=0)  # the span that kept the row
-            unions |= np.take(words, codes[first], axis=0)
-            for r in range(1, int(rank.max()) + 1):  # a few layers (np.bitwise_or.reduceat is much slower)
-                layer = np.flatnonzero(rank == r)
-                unions[group[layer]] |= np.take(words, codes[layer], axis=0)
-            scratch = np.arange(SPAN_CODES, SPAN_CODES + target.size)
-            words[SPAN_CODES : SPAN_CODES + target.size] = unions
-            index[target] = scratch
+            self._merge_lost_spans(index, keys[lost], codes[lost])
         np.take(self.span_table, index, axis=0, out=out.reshape(-1, ROW_BYTES), mode="clip")
+
+    def _merge_lost_spans(self, index: np.ndarray, keys: np.ndarray, codes: np.ndarray) -> None:
+        """Point the frame rows ``keys`` (crossed by the spans ``codes`` besides the one in ``index``) to scratch
+        table rows holding the OR of all their spans.
+
+        Each lost span gets a scratch row (the OR of its span and the row's kept one); one lost span per frame row
+        owns the row, and the others are OR-ed into the owner's scratch row, a layer at a time (no sorting).
+        """
+        count = keys.size
+        if SPAN_CODES + count > self.span_table.shape[0]:  # many spotlights: more scratch rows
+            grown = np.zeros((SPAN_CODES + 2 * count, ROW_BYTES), np.uint8)
+            grown[:SPAN_CODES] = span_rows()
+            self.span_table, self.span_words = grown, grown.view(np.uint32)
+            self.span_claim = np.zeros(2 * count, np.intp)
+        words = self.span_words
+        unions = words[SPAN_CODES : SPAN_CODES + count]
+        np.take(words, index[keys], axis=0, out=unions)  # the span that kept the row
+        unions |= np.take(words, codes, axis=0)
+        position = np.arange(count)
+        index[keys] = position + SPAN_CODES  # the last writer owns the row
+        owner = index[keys] - SPAN_CODES
+        pending = np.flatnonzero(owner != position)
+        claim = self.span_claim
+        while pending.size:  # rows with several lost spans (one layer per extra span: usually one or two)
+            target = owner[pending]
+            claim[target] = pending
+            won = claim[target] == pending
+            unions[target[won]] |= unions[pending[won]]
+            pending = pending[~won]
 
     def _update_under(self, idx: Index, red: np.ndarray) -> None:
         """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
