@@ -445,6 +445,7 @@ SETTINGS = np.dtype(
         ("steps_per_coin", np.int64),
         ("use_exit", bool),
         ("coin_scale", np.float64),
+        ("coin_sprite", np.int64),  # id of the coin sprite in the core's coin SpriteScatter
         ("coin_reach", np.int64),  # coin radius + agent radius
         ("exit_scale", np.float64),
         ("exit_reach", np.float64),  # exit radius + agent radius
@@ -519,6 +520,7 @@ class SearingSpotlightsCore(BatchedCore):
             setattr(self, name, self.settings[name])
         self.orders: list[dict[bool, tuple[tuple[str, ...], tuple[str, ...]]]] = [{} for _ in range(n)]
         self.agent_sprites = SpriteScatter()  # every agent scale met so far (settings hold the first id)
+        self.coin_sprites = SpriteScatter()  # every coin scale met so far
         self._settings_cache: dict[tuple, tuple[np.void, dict]] = {}
         # episode state
         i64 = np.int64
@@ -615,6 +617,7 @@ class SearingSpotlightsCore(BatchedCore):
         record["agent_hidden"] = not opts["agent_visible"]
         record["coins_visible"] = opts["coins_visible"]
         record["coin_scale"] = opts["coin_scale"]
+        record["coin_sprite"] = self.coin_sprites.add((coin_sprite(float(opts["coin_scale"])),))
         record["coin_reach"] = int(10 * opts["coin_scale"]) + radius
         record["any_visible"] = opts["agent_visible"] or opts["coins_visible"] or opts.get("exit_visible", False)
         record["hud_flags27"] = 27 * (4 * endless + 2 * opts["show_last_action"] + opts["show_last_positive_reward"])
@@ -1101,14 +1104,34 @@ class SearingSpotlightsCore(BatchedCore):
 
     def _paste_agents(self, frames: np.ndarray, local: np.ndarray, ids: np.ndarray, x: np.ndarray, y: np.ndarray):
         """Paste agent sprites ``ids`` centred on (x, y) into ``frames[local]`` (a buffer ending with a spare frame)."""
-        if len(local) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
-            sprites = self.agent_sprites.sprites
-            for i, sprite_id, cx, cy in zip(local.tolist(), ids.tolist(), x.tolist(), y.tolist(), strict=True):
-                paste_centred(sprites[sprite_id], frames[i], cx, cy)
-            return
         half = self.agent_sprites.heights[ids] // 2  # square sprites, centred on the agent
-        frames = frames.reshape(-1, SCREEN, SCREEN, 3)
-        self.agent_sprites.paste(frames, local, ids, y - half, x - half, True)
+        self._paste_sprites(self.agent_sprites, frames, local, ids, x, y, half)
+
+    def _paste_coins(self, frames: np.ndarray, local: np.ndarray, slots: np.ndarray) -> None:
+        """Paste the first coin of each of ``slots`` into ``frames[local]`` (a buffer ending with a spare frame)."""
+        ids = self.coin_sprite[slots]
+        radius = self.coin_sprites.heights[ids] // 2 - 1  # the coin's canvas is one px larger than its disc
+        self._paste_sprites(self.coin_sprites, frames, local, ids, self.coin_x[slots, 0], self.coin_y[slots, 0], radius)
+
+    @staticmethod
+    def _paste_sprites(
+        scatter: SpriteScatter,
+        frames: np.ndarray,
+        local: np.ndarray,
+        ids: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        centre: np.ndarray,
+    ) -> None:
+        """Paste sprites ``ids`` of ``scatter`` with their pixel (centre, centre) on (x, y) into ``frames[local]``."""
+        if len(local) <= 2:  # a few sprites: slice pastes are cheaper than the batched scatter
+            sprites = scatter.sprites
+            for i, sprite_id, cx, cy, c in zip(
+                local.tolist(), ids.tolist(), x.tolist(), y.tolist(), centre.tolist(), strict=True
+            ):
+                paste_centred(sprites[sprite_id], frames[i], cx, cy, centre=c)
+            return
+        scatter.paste(frames.reshape(-1, SCREEN, SCREEN, 3), local, ids, y - centre, x - centre, True)
 
     def _agent_ids(self, slots: np.ndarray) -> np.ndarray:
         """The agents' sprite ids in the current frames (the reset frame shows the agent facing up)."""
@@ -1156,6 +1179,11 @@ class SearingSpotlightsCore(BatchedCore):
             special = np.flatnonzero(self.t[idx] < self.special_until[idx])
         else:
             special = ()
+        if self.endless and len(special):  # the new coin, the only entity above the darkness: pasted at once
+            alone = ~self.any_visible[slots[special]]
+            if alone.any():
+                self._paste_coins(out, special[alone], slots[special[alone]])
+                special = special[~alone]
         for i in special:
             k = int(slots[i])
             for name in self.orders[k][self._coin_above(k)][0]:
