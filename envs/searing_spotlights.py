@@ -445,6 +445,7 @@ SETTINGS = np.dtype(
         ("steps_per_coin", np.int64),
         ("use_exit", bool),
         ("coin_scale", np.float64),
+        ("coin_sprite", np.int64),  # id of the coin sprite in the core's coin SpriteScatter
         ("coin_reach", np.int64),  # coin radius + agent radius
         ("exit_scale", np.float64),
         ("exit_reach", np.float64),  # exit radius + agent radius
@@ -519,6 +520,7 @@ class SearingSpotlightsCore(BatchedCore):
             setattr(self, name, self.settings[name])
         self.orders: list[dict[bool, tuple[tuple[str, ...], tuple[str, ...]]]] = [{} for _ in range(n)]
         self.agent_sprites = SpriteScatter()  # every agent scale met so far (settings hold the first id)
+        self.coin_sprites = SpriteScatter()  # every coin scale met so far
         self._settings_cache: dict[tuple, tuple[np.void, dict]] = {}
         # episode state
         i64 = np.int64
@@ -558,6 +560,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.span_table = np.zeros((SPAN_CODES + n * SCREEN, ROW_BYTES), np.uint8)
         self.span_table[:SPAN_CODES] = span_rows()
         self.span_words = self.span_table.view(np.uint32)  # the same rows as 63 words, for OR-ing
+        self.span_claim = np.zeros(n * SCREEN, np.intp)  # scratch for ``_merge_lost_spans``
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
@@ -614,6 +617,7 @@ class SearingSpotlightsCore(BatchedCore):
         record["agent_hidden"] = not opts["agent_visible"]
         record["coins_visible"] = opts["coins_visible"]
         record["coin_scale"] = opts["coin_scale"]
+        record["coin_sprite"] = self.coin_sprites.add((coin_sprite(float(opts["coin_scale"])),))
         record["coin_reach"] = int(10 * opts["coin_scale"]) + radius
         record["any_visible"] = opts["agent_visible"] or opts["coins_visible"] or opts.get("exit_visible", False)
         record["hud_flags27"] = 27 * (4 * endless + 2 * opts["show_last_action"] + opts["show_last_positive_reward"])
@@ -1026,26 +1030,37 @@ class SearingSpotlightsCore(BatchedCore):
         index[keys] = codes
         lost = np.flatnonzero(index[keys] != codes)  # spans that lost their row to another one
         if lost.size:
-            keys, codes = keys[lost], codes[lost]
-            order = np.argsort(keys, kind="stable")
-            keys, codes = keys[order], codes[order]
-            starts = np.empty(keys.size, bool)  # groups of lost spans, one per row
-            starts[0] = True
-            np.not_equal(keys[1:], keys[:-1], out=starts[1:])
-            first = np.flatnonzero(starts)
-            group = np.cumsum(starts) - 1
-            rank = np.arange(keys.size) - first[group]  # position in the group
-            target = keys[first]
-            words = self.span_words
-            unions = np.take(words, index[target], axis=0)  # the span that kept the row
-            unions |= np.take(words, codes[first], axis=0)
-            for r in range(1, int(rank.max()) + 1):  # a few layers (np.bitwise_or.reduceat is much slower)
-                layer = np.flatnonzero(rank == r)
-                unions[group[layer]] |= np.take(words, codes[layer], axis=0)
-            scratch = np.arange(SPAN_CODES, SPAN_CODES + target.size)
-            words[SPAN_CODES : SPAN_CODES + target.size] = unions
-            index[target] = scratch
+            self._merge_lost_spans(index, keys[lost], codes[lost])
         np.take(self.span_table, index, axis=0, out=out.reshape(-1, ROW_BYTES), mode="clip")
+
+    def _merge_lost_spans(self, index: np.ndarray, keys: np.ndarray, codes: np.ndarray) -> None:
+        """Point the frame rows ``keys`` (crossed by the spans ``codes`` besides the one in ``index``) to scratch
+        table rows holding the OR of all their spans.
+
+        Each lost span gets a scratch row (the OR of its span and the row's kept one); one lost span per frame row
+        owns the row, and the others are OR-ed into the owner's scratch row, a layer at a time (no sorting).
+        """
+        count = keys.size
+        if SPAN_CODES + count > self.span_table.shape[0]:  # many spotlights: more scratch rows
+            grown = np.zeros((SPAN_CODES + 2 * count, ROW_BYTES), np.uint8)
+            grown[:SPAN_CODES] = span_rows()
+            self.span_table, self.span_words = grown, grown.view(np.uint32)
+            self.span_claim = np.zeros(2 * count, np.intp)
+        words = self.span_words
+        unions = words[SPAN_CODES : SPAN_CODES + count]
+        np.take(words, index[keys], axis=0, out=unions)  # the span that kept the row
+        unions |= np.take(words, codes, axis=0)
+        position = np.arange(count)
+        index[keys] = position + SPAN_CODES  # the last writer owns the row
+        owner = index[keys] - SPAN_CODES
+        pending = np.flatnonzero(owner != position)
+        claim = self.span_claim
+        while pending.size:  # rows with several lost spans (one layer per extra span: usually one or two)
+            target = owner[pending]
+            claim[target] = pending
+            won = claim[target] == pending
+            unions[target[won]] |= unions[pending[won]]
+            pending = pending[~won]
 
     def _update_under(self, idx: Index, red: np.ndarray) -> None:
         """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
@@ -1089,14 +1104,34 @@ class SearingSpotlightsCore(BatchedCore):
 
     def _paste_agents(self, frames: np.ndarray, local: np.ndarray, ids: np.ndarray, x: np.ndarray, y: np.ndarray):
         """Paste agent sprites ``ids`` centred on (x, y) into ``frames[local]`` (a buffer ending with a spare frame)."""
-        if len(local) <= 2:  # a few agents: slice pastes are cheaper than the batched scatter
-            sprites = self.agent_sprites.sprites
-            for i, sprite_id, cx, cy in zip(local.tolist(), ids.tolist(), x.tolist(), y.tolist(), strict=True):
-                paste_centred(sprites[sprite_id], frames[i], cx, cy)
-            return
         half = self.agent_sprites.heights[ids] // 2  # square sprites, centred on the agent
-        frames = frames.reshape(-1, SCREEN, SCREEN, 3)
-        self.agent_sprites.paste(frames, local, ids, y - half, x - half, True)
+        self._paste_sprites(self.agent_sprites, frames, local, ids, x, y, half)
+
+    def _paste_coins(self, frames: np.ndarray, local: np.ndarray, slots: np.ndarray) -> None:
+        """Paste the first coin of each of ``slots`` into ``frames[local]`` (a buffer ending with a spare frame)."""
+        ids = self.coin_sprite[slots]
+        radius = self.coin_sprites.heights[ids] // 2 - 1  # the coin's canvas is one px larger than its disc
+        self._paste_sprites(self.coin_sprites, frames, local, ids, self.coin_x[slots, 0], self.coin_y[slots, 0], radius)
+
+    @staticmethod
+    def _paste_sprites(
+        scatter: SpriteScatter,
+        frames: np.ndarray,
+        local: np.ndarray,
+        ids: np.ndarray,
+        x: np.ndarray,
+        y: np.ndarray,
+        centre: np.ndarray,
+    ) -> None:
+        """Paste sprites ``ids`` of ``scatter`` with their pixel (centre, centre) on (x, y) into ``frames[local]``."""
+        if len(local) <= 2:  # a few sprites: slice pastes are cheaper than the batched scatter
+            sprites = scatter.sprites
+            for i, sprite_id, cx, cy, c in zip(
+                local.tolist(), ids.tolist(), x.tolist(), y.tolist(), centre.tolist(), strict=True
+            ):
+                paste_centred(sprites[sprite_id], frames[i], cx, cy, centre=c)
+            return
+        scatter.paste(frames.reshape(-1, SCREEN, SCREEN, 3), local, ids, y - centre, x - centre, True)
 
     def _agent_ids(self, slots: np.ndarray) -> np.ndarray:
         """The agents' sprite ids in the current frames (the reset frame shows the agent facing up)."""
@@ -1144,6 +1179,11 @@ class SearingSpotlightsCore(BatchedCore):
             special = np.flatnonzero(self.t[idx] < self.special_until[idx])
         else:
             special = ()
+        if self.endless and len(special):  # the new coin, the only entity above the darkness: pasted at once
+            alone = ~self.any_visible[slots[special]]
+            if alone.any():
+                self._paste_coins(out, special[alone], slots[special[alone]])
+                special = special[~alone]
         for i in special:
             k = int(slots[i])
             for name in self.orders[k][self._coin_above(k)][0]:

@@ -565,3 +565,26 @@ def test_endless_first_coin_can_spawn_within_reach_of_the_agent() -> None:
             _, reward, *_ = env.step([0, 0])
             close.append((seed, reward))
     assert close and all(reward == 0.25 for _, reward in close)
+
+
+def test_hole_masks_of_many_overlapping_spotlights_are_the_union_of_their_discs() -> None:
+    """Rows crossed by many spotlights (several lost spans per row, more than the scratch rows at first)."""
+    from envs.drawing import disc_mask
+
+    core = SearingSpotlightsCore(num_envs=2)
+    core.reset_slots([0, 1], [3, 4], {"initial_spawns": 40, "spot_damage": 0.0})
+    for _ in range(50):
+        core.step(np.zeros((2, 2), np.int64))
+    spots = core.spots
+    out = np.empty((2, SCREEN, SCREEN * 3), np.uint8)
+    core._hole_masks(out, spots["centre"], spots["base"], spots["drawn"])
+    margin = 64
+    for k in range(2):
+        pixels = np.zeros((SCREEN + 2 * margin, SCREEN + 2 * margin), bool)
+        for j in np.flatnonzero(spots["drawn"][k]):
+            disc, offset = disc_mask(int(spots["radius"][k, j]))
+            centre = spots["centre"][k, j]
+            top, left = int(centre.imag) + offset + margin, int(centre.real) + offset + margin
+            pixels[top : top + disc.shape[0], left : left + disc.shape[1]] |= disc
+        expected = np.repeat(pixels[margin:-margin, margin:-margin], 3, axis=1).astype(np.uint8) * 255
+        assert (out[k, 4:] == expected[4:]).all()
