@@ -12,8 +12,10 @@ Two faces wrap one core: :class:`MemoryGymEnv` (``gymnasium.make``, one slot) an
 What a family implements (``idx`` is ``slice(None)`` for all slots or an int array of slot indices):
 
 * ``option_specs`` (dict of :class:`~envs.options.Option`), ``single_observation_space``, ``single_action_space``;
-* ``_reset_slot(k, rng, opts)``: build slot k's level with the reference's RNG calls and draw its first frame
-  (optionally ``_reset_slots(slots, rngs, opts)``, which builds several at once; by default it loops);
+* ``_reset_slot(k, rng, opts)``: build slot k's level with the reference's RNG calls and draw its first frame; or
+  instead ``_reset_slots(slots, rngs, opts)``, which builds the levels of several slots at once (the RNG calls stay
+  per slot and in order; array writes and first frames are shared). The default ``_reset_slots`` loops over
+  ``_reset_slot``; :meth:`BatchedCore.reset_slots` is the entry point either way;
 * ``_step(idx, actions) -> (rewards, terminated)``: advance the slots ``idx`` and draw their frames;
 * ``_observation(idx)``: the observation arrays of the slots (views are fine, the faces copy);
 * ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here);
