@@ -34,8 +34,9 @@ import numpy as np
 from envs.core import BatchedCore, Index
 from envs.drawing import SCREEN, Sprite, SpriteScatter, agent_sprites, blend, pygame, round_half_away, surface_to_sprite
 from envs.movement import continuous_heading, continuous_velocity, grid_step
-from envs.mystery_path_generator import generate_path
+from envs.mystery_path_generator import draw_path, generate_path
 from envs.options import Option
+from envs.rng import BoundedDraws
 
 GRID = 7  # tiles per side of a level (and of an endless segment)
 TILE = SCREEN // GRID  # 12 px
@@ -87,6 +88,7 @@ NEW_TILE, REFILL = 1, 2
 # Endless ground truth: the direction from the current tile to the next path tile.
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.int64)  # east, north, south
 EAST, NORTH, SOUTH, WEST = 0, 1, 2, -1
+STEP_DIRECTIONS = {GRID: EAST, -1: NORTH, 1: SOUTH, -GRID: WEST}  # by the step between tile indices 7 * x + y
 
 # The endless floor is drawn band by band: a band is one tile row of the screen, and all its pixel rows equal either
 # its "edge" row (first and last row of a tile) or its "middle" row. Bands are padded by one tile on both sides so
@@ -194,17 +196,20 @@ def _ice_background(phase: int) -> np.ndarray:
 
 # -------------------------------------------------------------------------------------------------- canvas
 class _Canvas:
-    """The frames of all slots, with a margin around each so that sprites can be scattered without clipping."""
+    """The frames of all slots, with spare rows above and below each so that sprites can be scattered without
+    clipping them vertically. Rows are not padded, so that each frame is one contiguous block (copying and filling
+    frames is then about twice as fast); the rare sprite with opaque pixels left or right of the screen is pasted
+    on its own, clipped."""
 
     def __init__(self, num_envs: int) -> None:
         self.num_envs = num_envs
+        self._columns: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # see _opaque_columns
         self._allocate(0)
 
     def _allocate(self, margin: int) -> None:
         self.margin = margin
-        side = SCREEN + 2 * margin
-        self.buffer = np.zeros((self.num_envs, side, side, 3), dtype=np.uint8)
-        self.view = self.buffer[:, margin : margin + SCREEN, margin : margin + SCREEN]
+        self.buffer = np.zeros((self.num_envs, SCREEN + 2 * margin, SCREEN, 3), dtype=np.uint8)
+        self.view = self.buffer[:, margin : margin + SCREEN]
         # The same pixels split into tile bands: (slot, band, row in band, column, channel).
         self.bands = self.view.reshape(self.num_envs, GRID, TILE, SCREEN, 3)
         assert np.shares_memory(self.bands, self.buffer)
@@ -215,6 +220,16 @@ class _Canvas:
             frames = self.view.copy()
             self._allocate(sprites.max_side)
             self.view[:] = frames
+
+    def _opaque_columns(self, sprites: SpriteScatter) -> tuple[np.ndarray, np.ndarray]:
+        """First and last opaque column of every sprite of ``sprites`` (kept until sprites are added)."""
+        known = self._columns.get(id(sprites))
+        if known is None or known[0] != len(sprites.sprites):
+            columns = [np.flatnonzero(sprite.mask.any(axis=0)) for sprite in sprites.sprites]
+            first = np.array([c[0] for c in columns], dtype=np.int64)
+            last = np.array([c[-1] for c in columns], dtype=np.int64)
+            known = self._columns[id(sprites)] = (len(sprites.sprites), first, last)
+        return known[1], known[2]
 
     def paste(
         self,
@@ -227,14 +242,21 @@ class _Canvas:
     ) -> None:
         """Paste sprite ``ids[i]`` into slot ``slots[i]`` with its top-left at screen pixel (top[i], left[i]).
 
-        Sprites at least partly on the screen need no clipping (the margin is as wide as the largest sprite).
-        ``may_leave_screen`` moves sprites that are entirely off the screen into the margin.
+        Sprites at least partly on the screen need no vertical clipping (the margin is as high as the largest
+        sprite); ``may_leave_screen`` moves sprites that are entirely above or below the screen into the margin.
         """
-        m = self.margin
+        first, last = self._opaque_columns(sprites)
+        inside = (left + first[ids] >= 0) & (left + last[ids] < SCREEN)
+        scattered = top
         if may_leave_screen:
-            top = np.minimum(np.maximum(top, -m), SCREEN + m - sprites.heights[ids])
-            left = np.minimum(np.maximum(left, -m), SCREEN + m - sprites.widths[ids])
-        sprites.paste(self.buffer, slots, ids, top + m, left + m)
+            m = self.margin
+            scattered = np.minimum(np.maximum(top, -m), SCREEN + m - sprites.heights[ids])
+        if inside.all():
+            sprites.paste(self.buffer, slots, ids, scattered + self.margin, left)
+            return
+        sprites.paste(self.buffer, slots[inside], ids[inside], scattered[inside] + self.margin, left[inside])
+        for i in np.flatnonzero(~inside).tolist():  # opaque pixels left or right of the screen: clipped
+            sprites.sprites[ids[i]].paste(self.view[slots[i]], int(top[i]), int(left[i]))
 
 
 # ---------------------------------------------------------------------------------------------------- core
@@ -328,28 +350,32 @@ class MysteryPathCore(BatchedCore):
         self.show_past_path = np.zeros(n, dtype=bool)
         self.show_background = np.zeros(n, dtype=bool)
         self.show_stamina = np.zeros(n, dtype=bool)
+        self.first_frames: dict[tuple, np.ndarray] = {}  # see _draw_first_frame
 
     # ------------------------------------------------------------------------------------------- reset
-    def _reset_slot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> None:
+    def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
+        # Values that follow from the options are written to all the slots at once; the levels are built slot by slot.
         scale = GRID_AGENT_SCALE if self.grid else opts["agent_scale"]
         first = self.agents.add(agent_sprites(scale))
         self.canvas.fit(self.agents)
-        self.sprite0[k] = first
-        self.half[k] = self.agents.sprites[first].width // 2
         radius = int(25 * scale)
+        at = slots[0] if len(slots) == 1 else np.array(slots)  # one slot: scalar writes are cheaper
+        self.sprite0[at] = first
+        self.half[at] = self.agents.sprites[first].width // 2
         if not self.grid:
-            self.velocity[k] = _velocities(self.endless, float(opts["agent_speed"]))
-        self.t[k] = 0
-        self.max_steps[k] = opts["max_steps"]
-        self.num_fails[k] = 0
-        self.off_path[k] = False
-        self.cross_visible[k] = False
-        self.visual_feedback[k] = opts["visual_feedback"]
+            self.velocity[at] = _velocities(self.endless, float(opts["agent_speed"]))
+        self.t[at] = 0
+        self.max_steps[at] = opts["max_steps"]
+        self.num_fails[at] = 0
+        self.off_path[at] = False
+        self.cross_visible[at] = False
+        self.visual_feedback[at] = opts["visual_feedback"]
         if self.endless:
-            self._reset_endless(k, rng, opts, radius)
+            self._reset_endless(slots, at, rngs, opts, radius)
         else:
-            self._reset_level(k, rng, opts, radius)
-        self._draw_slot(k)
+            for k, rng in zip(slots, rngs, strict=True):
+                self._reset_level(k, rng, opts, radius)
+                self._draw_slot(k)
 
     def _reset_level(self, k: int, rng: np.random.Generator, opts: dict[str, Any], radius: int) -> None:
         choice = opts["cardinal_origin_choice"]
@@ -393,65 +419,93 @@ class MysteryPathCore(BatchedCore):
         if opts["show_goal"]:
             _fill_tile(background, goal, GOAL_COLOUR)
 
-    def _reset_endless(self, k: int, rng: np.random.Generator, opts: dict[str, Any], radius: int) -> None:
-        self.depth[k] = int(opts["camera_offset_scale"])
-        self.show_past_path[k] = opts["show_past_path"]
-        self.show_background[k] = opts["show_background"]
-        self.show_stamina[k] = opts["show_stamina"]
-        if self.segment_rng[k] is rng:  # the generator continues: first make the last episode's remaining draws
-            self._catch_up(k)
-        self.segment_rng[k] = rng
-        self.chain_lists[k] = ([], [])
-        self.segment_ends[k] = []
-        self.num_segments[k] = 0
-        self.reference_segments[k] = INITIAL_SEGMENTS
-        self.walks_until[k] = 0
-        self.tile_node[k] = -1
-        self._add_segment(k, rng)
-        self._enter_segment(k, 0)
-        self.flags[k, 0] &= ~NEW_TILE  # the very first tile pays nothing
-        self.current_node[k] = 0
-        self.draw_from[k] = 0
-        self.ground_truth[k] = self.direction[k, 0]  # never west: the first tile is in column 0
-        self.heading[k] = 270  # facing right
-        self.return_pos[k] = (self.chain_x[k, 0] * TILE + radius, self.chain_y[k, 0] * TILE + radius)
-        self.pos[k] = self.return_pos[k]
+    def _reset_endless(
+        self, slots: list[int], at: int | np.ndarray, rngs: list[np.random.Generator], opts: dict[str, Any], radius: int
+    ) -> None:
+        self.depth[at] = int(opts["camera_offset_scale"])
+        self.show_past_path[at] = opts["show_past_path"]
+        self.show_background[at] = opts["show_background"]
+        self.show_stamina[at] = opts["show_stamina"]
+        self.current_node[at] = 0
+        self.draw_from[at] = 0
+        self.heading[at] = 270  # facing right
         step = opts["reward_step"]
-        self.reward_table[k, 0] = 0 + step  # index: 1 for a new tile + 2 for a fall-off
-        self.reward_table[k, 1] = (0 + opts["reward_path_progress"]) + step
-        self.reward_table[k, 2:] = (0 + opts["reward_fall_off"]) + step
-        self.stamina_level[k] = self.stamina[k] = opts["stamina_level"]
-        self.max_x[k] = 0
-        self.tiles_visited[k] = 0
-        self.fall_off_tiles[k] = set()
-        self.camera_offset[k] = -TILE * opts["camera_offset_scale"]
-        self.camera_x[k] = self.camera_offset[k]
-        self.bg_scroll[k] = 0.0
-        # The agent is always drawn at the same screen column: its start column minus the camera offset.
-        self.agent_screen_left[k] = int(self.return_pos[k, 0] - self.half[k] - self.camera_offset[k])
+        self.reward_table[at, 0] = 0 + step  # index: 1 for a new tile + 2 for a fall-off
+        self.reward_table[at, 1] = (0 + opts["reward_path_progress"]) + step
+        self.reward_table[at, 2:] = (0 + opts["reward_fall_off"]) + step
+        self.stamina_level[at] = opts["stamina_level"]
+        self.stamina[at] = opts["stamina_level"]
+        self.max_x[at] = 0
+        self.tiles_visited[at] = 0
+        camera_offset = -TILE * opts["camera_offset_scale"]
+        self.camera_offset[at] = camera_offset
+        self.camera_x[at] = camera_offset
+        self.bg_scroll[at] = 0.0
+        # The agent is always drawn at the same screen column: its start column (the path starts in column 0)
+        # minus the camera offset.
+        self.agent_screen_left[at] = int(radius - self.half[slots[0]] - camera_offset)
+        for k, rng in zip(slots, rngs, strict=True):
+            if self.segment_rng[k] is rng:  # the generator continues: first make the last episode's remaining draws
+                self._catch_up(k)
+            self.segment_rng[k] = rng
+            self.reference_segments[k] = INITIAL_SEGMENTS
+            self.chain_lists[k] = ([], [])
+            self.segment_ends[k] = []
+            self.num_segments[k] = 0
+            self.walks_until[k] = 0
+            self.tile_node[k] = -1
+            self._add_segment(k, rng)
+            self._enter_segment(k, 0)
+            self.flags[k, 0] = REFILL  # the very first tile pays nothing
+            self.ground_truth[k] = self.direction[k, 0]  # never west: the first tile is in column 0
+            self.return_pos[k] = self.pos[k] = (radius, self.chain_lists[k][1][0] * TILE + radius)
+            self.fall_off_tiles[k] = set()
+            self._draw_first_frame(k)
+
+    def _draw_first_frame(self, k: int) -> None:
+        """Draw the first endless frame of slot ``k``: it depends only on the agent's start row and a few options, so
+        each is drawn once (by :meth:`_draw_slot`) and copied afterwards."""
+        key = (
+            int(self.sprite0[k]) + int(self.heading[k]) // 45,
+            int(self.pos[k, 1] - self.half[k]),
+            int(self.agent_screen_left[k]),
+            bool(self.show_background[k]),
+            bool(self.show_stamina[k]),
+        )
+        frame = self.first_frames.get(key)
+        if frame is None:
+            self._draw_slot(k)
+            self.first_frames[key] = self.canvas.view[k].copy()
+        else:
+            self.canvas.view[k] = frame
 
     def _add_segment(self, k: int, rng: np.random.Generator) -> None:
         """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile."""
         segment = int(self.num_segments[k])
-        start_y = int(rng.integers(0, GRID)) if segment == 0 else int(self.last_goal_y[k])
-        goal_y = int(rng.integers(0, GRID))
-        layout = generate_path(rng, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
+        draws = BoundedDraws(rng)
+        draws.read_ahead()  # the level needs a few dozen words: fetch them before the first draw
+        start_y = draws.below(GRID) if segment == 0 else int(self.last_goal_y[k])
+        goal_y = draws.below(GRID)
+        path, _ = draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
+        draws.close()
         shift = segment * SEGMENT_COLUMNS
         xs, ys = self.chain_lists[k]
         begin = len(xs)
-        xs += [x + shift for x, _ in layout.path] + [shift + GRID]
-        ys += [y for _, y in layout.path] + [goal_y]
+        xs += [t // GRID + shift for t in path]
+        xs.append(shift + GRID)  # the transition tile
+        ys += [t % GRID for t in path]
+        ys.append(goal_y)
         end = len(xs)
         self._reserve(end, (segment + 2) * SEGMENT_COLUMNS)
-        tiles = np.array([xs[begin:end], ys[begin:end]])
-        self.chain_x[k, begin:end] = tiles[0]
-        self.chain_y[k, begin:end] = tiles[1]
-        first = max(begin - 1, 0)  # the previous segment's last tile gets its direction now
-        directions = [_direction(xs[i], ys[i], xs[i + 1], ys[i + 1]) for i in range(first, end - 1)]
-        self.direction[k, first : end - 1] = directions
-        self.direction[k, end - 1] = EAST  # the next segment starts right of the transition tile
+        self.chain_x[k, begin:end] = xs[begin:]
+        self.chain_y[k, begin:end] = ys[begin:]
+        # Path tiles are 4-neighbours (index steps of +-GRID or +-1); the goal's transition tile is east of it, and
+        # the next segment starts east of the transition tile.
+        steps = [b - a for a, b in zip(path, path[1:], strict=False)]
+        self.direction[k, begin:end] = [STEP_DIRECTIONS[d] for d in steps] + [EAST, EAST]
         self.flags[k, begin:end] = NEW_TILE | REFILL
-        self.tile_node[k, tiles[0], tiles[1] + 1] = range(begin, end)
+        where = [x * (GRID + 2) + y + 1 for x, y in zip(xs[begin:], ys[begin:], strict=True)]
+        self.tile_node[k].put(where, range(begin, end))  # tile_node[k, x, y + 1] = chain index
         self.segment_ends[k].append(end)
         self.num_segments[k] = segment + 1
         self.last_goal_y[k] = goal_y
@@ -472,8 +526,11 @@ class MysteryPathCore(BatchedCore):
             self._catch_up(k)
         begin, end = int(self.walks_until[k]), self.segment_ends[k][segment]
         if end > begin:
-            xs = self.chain_lists[k][0]
-            self.walk_start[k, begin:end] = [self._walk_start(k, i, xs[i] - 1) for i in range(begin, end)]
+            if self.show_past_path[k]:
+                xs, depth = self.chain_lists[k][0], int(self.depth[k])
+                self.walk_start[k, begin:end] = [_walk_start(xs, i, xs[i] - 1, depth) for i in range(begin, end)]
+            else:
+                self.walk_start[k, begin:end] = range(begin, end)
             self.walks_until[k] = end
         self.prepare_at[k] = (segment + 1) * SEGMENT_COLUMNS * TILE
 
@@ -486,21 +543,6 @@ class MysteryPathCore(BatchedCore):
         """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""
         self._catch_up(k)
         return self.chain_lists[k]
-
-    def _walk_start(self, k: int, node: int, column: int) -> int:
-        """First chain tile of the past path drawn behind an agent in ``column + 1`` whose last path tile is ``node``.
-
-        The walk goes back from the tile before ``node`` and stops after the first tile whose column is at most
-        ``max(0, column - depth)``, or at the first tile of the path. Nothing is drawn when ``column < 0``.
-        """
-        if column < 0 or not self.show_past_path[k]:
-            return node
-        xs = self.chain_lists[k][0]
-        last = max(0, column - int(self.depth[k]))
-        i = node - 1
-        while i > 0 and xs[i] > last:
-            i -= 1
-        return max(i, 0)
 
     def _reserve(self, length: int, columns: int) -> None:
         """Grow the chain and tile arrays of all slots so that they hold ``length`` tiles and ``columns`` columns."""
@@ -632,7 +674,10 @@ class MysteryPathCore(BatchedCore):
         if not ends:
             seen.add(tile)
         self.flags[k, : len(self.chain_lists[k][0])] |= REFILL
-        self.draw_from[k] = self._walk_start(k, node, column - 1)
+        if self.show_past_path[k]:
+            self.draw_from[k] = _walk_start(self.chain_lists[k][0], node, column - 1, int(self.depth[k]))
+        else:
+            self.draw_from[k] = node
         return ends
 
     def _step_level(self, idx: Index, slots: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -886,11 +931,20 @@ def _velocities(endless: bool, speed: float) -> np.ndarray:
     return np.stack([vx, vy], axis=1).astype(np.int64)
 
 
-def _direction(x0: int, y0: int, x1: int, y1: int) -> int:
-    """Ground-truth direction of a step along the path (west has no code)."""
-    if x1 - x0 == 1:
-        return EAST
-    return NORTH if y1 - y0 == -1 else (SOUTH if y1 - y0 == 1 else WEST)
+def _walk_start(xs: list[int], node: int, column: int, depth: int) -> int:
+    """First chain tile of the past path drawn behind an agent in ``column + 1`` whose last path tile is ``node``
+    (``xs``: the chain's columns; ``depth``: columns drawn behind the agent's column).
+
+    The walk goes back from the tile before ``node`` and stops after the first tile whose column is at most
+    ``max(0, column - depth)``, or at the first tile of the path. Nothing is drawn when ``column < 0``.
+    """
+    if column < 0:
+        return node
+    last = max(0, column - depth)
+    i = node - 1
+    while i > 0 and xs[i] > last:
+        i -= 1
+    return max(i, 0)
 
 
 def _fill_tile(frame: np.ndarray, tile: tuple[int, int], colour: tuple[int, int, int]) -> None:

@@ -32,7 +32,7 @@ The search never failed on a 7 x 7 grid; if no path exists it raises ``RuntimeEr
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cache
 
 import numpy as np
@@ -67,6 +67,15 @@ class _Grid:
     border: tuple[int, ...]  # border tiles, column by column
     distance: tuple[tuple[float, ...], ...]  # distance[goal][tile]: straight-line distance between the two
     tiles: tuple[Tile, ...]  # (x, y) of each index
+    _candidates: dict[tuple[int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
+
+    def border_candidates(self, start: int, end: int) -> tuple[int, ...]:
+        """Border tiles that are neither ``start`` nor ``end`` nor a 4-neighbour of either (kept once computed)."""
+        found = self._candidates.get((start, end))
+        if found is None:
+            excluded = self.near[start] | self.near[end]
+            found = self._candidates[start, end] = tuple(t for t in self.border if not (excluded >> t) & 1)
+        return found
 
 
 @cache
@@ -96,12 +105,22 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
 
     ``origin`` and ``goal`` should lie on the border; ``rng`` is advanced exactly as memory-gym 1.0.2 advances it.
     """
+    draws = BoundedDraws(rng)
+    path, walls = draw_path(draws, width, height, origin, goal)
+    draws.close()
+    tiles = _grid(int(width), int(height)).tiles
+    return MysteryPathLayout(path=tuple(tiles[t] for t in path), walls=tuple(tiles[t] for t in walls))
+
+
+def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: Tile) -> tuple[list[int], list[int]]:
+    """:func:`generate_path` on tile indices ``x * height + y``: (path origin first, walls), drawn from ``draws``.
+
+    The caller closes ``draws`` (so that it may make draws of its own before and after, from the same words).
+    """
     grid = _grid(int(width), int(height))
     start = int(origin[0]) * grid.height + int(origin[1])
     end = int(goal[0]) * grid.height + int(goal[1])
     n = grid.width * grid.height
-
-    draws = BoundedDraws(rng)  # the number of draws depends on the search: read ahead, rewind at the end
 
     # 1. Inner walls (a bit mask, and a list in the order they were made).
     inner = grid.inner
@@ -109,42 +128,40 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
     wall_bits = sum(1 << tile for tile in walls)
 
     # 2. Border walls.
-    excluded = grid.near[start] | grid.near[end]
     surrounding = grid.surrounding
-    candidates = [t for t in grid.border if not (excluded >> t) & 1 and not surrounding[t] & wall_bits]
+    candidates = [t for t in grid.border_candidates(start, end) if not surrounding[t] & wall_bits]
     for _ in range(BORDER_WALL_COUNTS[draws.below(len(BORDER_WALL_COUNTS))]):
         if candidates:
             tile = candidates.pop(draws.below(len(candidates)))
-            wall_bits |= 1 << tile
             walls.append(tile)
 
-    # 3. Randomised best-first search. Tile states: 0 not seen, 1 open, 2 closed or wall.
+    # 3. Randomised best-first search. Tile states: 0 not seen, 1 open, 2 closed or wall. The open list is kept as
+    # two parallel lists (tiles and their f) so that the scan for the next tile reads f directly.
     state = [0] * n
     for tile in walls:
         state[tile] = 2
     neighbours, distance = grid.neighbours, grid.distance[end]
     g = [0] * n
-    f = [0.0] * n
     parent = [-1] * n
-    open_list = [start]
+    open_tiles, open_f = [start], [0.0]
     state[start] = 1
     # The step costs integers(1, 9) are read inline from the 32-bit outputs: for a range of 8 numpy's method is
     # "the top 3 bits" and never redraws.
     assert COST_HIGH - COST_LOW == 8
     words, used = draws.words, draws.used
-    while open_list:
-        head = f[open_list[0]]
-        pick = 0
-        for i in range(1, len(open_list)):
-            if f[open_list[i]] < head:
-                pick = i
+    while open_tiles:
+        head, pick = open_f[0], 0
+        for value in open_f:  # the first one below the head (never the head itself), else the head
+            if value < head:
+                pick = open_f.index(value)
                 break
-        current = open_list[pick]
+        current = open_tiles[pick]
         if current == end:
             break
-        del open_list[pick]
+        del open_tiles[pick], open_f[pick]
         state[current] = 2
         if used + 4 > len(words):  # enough words for every neighbour
+            draws.used = used
             draws.read_ahead()
         g_current = g[current] + COST_LOW
         for tile in neighbours[current]:
@@ -158,18 +175,19 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
                     parent[tile] = current  # the better cost itself is not kept (f stays as it was)
             else:
                 g[tile] = cost
-                f[tile] = cost + distance[tile]
                 parent[tile] = current
                 state[tile] = 1
-                open_list.append(tile)
+                open_tiles.append(tile)
+                open_f.append(cost + distance[tile])
     else:
         raise RuntimeError("No valid path found")
     draws.used = used
-    draws.close()
 
     # 4. The parent chain, origin first.
-    chain = [end]
-    while parent[chain[-1]] >= 0:
-        chain.append(parent[chain[-1]])
-    tiles = grid.tiles
-    return MysteryPathLayout(path=tuple(tiles[t] for t in reversed(chain)), walls=tuple(tiles[t] for t in walls))
+    path = [end]
+    tile = parent[end]
+    while tile >= 0:
+        path.append(tile)
+        tile = parent[tile]
+    path.reverse()
+    return path, walls

@@ -495,3 +495,10 @@ def test_endless_segments_are_built_lazily_with_the_reference_stream() -> None:
     walk_endless_to_column(env, 8)  # entering the second segment builds what the reference has: three segments
     assert core.num_segments[0] == 3
     assert list(zip(*core.chain_lists[0], strict=True)) == [t for seg in first for t in seg]
+    walk_endless_to_column(env, 16)  # entering the third segment: the reference builds a fourth
+    assert core.num_segments[0] == 4
+    rng = envs.core.seeded_generator(21)
+    _reference_segments(rng, 4)
+    after_four = _reference_segments(rng, 3)
+    env.reset()  # generator continued: the draws of all four segments come first
+    assert list(zip(*core.path_tiles(0), strict=True)) == [t for seg in after_four for t in seg]
