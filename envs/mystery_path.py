@@ -844,13 +844,17 @@ class MysteryPathCore(BatchedCore):
         return (SCREEN * (1 - np.minimum(self.stamina[slots], level) / level)).astype(np.int64)
 
     def _draw_floor(self, idx: Index, slots: np.ndarray) -> None:
-        """The endless floor (black or scrolling ice) and the path tiles behind the agent, band by band."""
-        m = len(slots)
-        phase = np.where(self.show_background[idx], (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
-        edge = np.empty((m, GRID, BAND_WIDTH, 3), dtype=np.uint8)
-        middle = np.empty((m, GRID, BAND_WIDTH, 3), dtype=np.uint8)
-        edge[:, :, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_EDGE[phase][:, None]
-        middle[:, :, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_MIDDLE[phase][:, None]
+        """The endless floor (black or scrolling ice) and the path tiles behind the agent, band by band.
+
+        Black frames are cleared in one fill; then only the bands that hold something are written: every band of
+        an ice floor, and the bands of a black floor that hold past-path tiles."""
+        ice = self.show_background[idx]
+        phase = np.where(ice, (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
+        if isinstance(idx, slice) and not ice.any():
+            self.canvas.view.fill(0)
+        elif not ice.all():
+            self.canvas.view[slots[~ice]] = 0
+        drawn = np.repeat(ice, GRID)  # (row of slots, band) -> band is written
         first = self.draw_from[idx]
         count = self.current_node[idx] - first
         most = int(count.max())
@@ -858,20 +862,30 @@ class MysteryPathCore(BatchedCore):
             rows, cols = np.nonzero(np.arange(most) < count[:, None])
             owner = slots[rows]
             chain = first[rows] + cols
+            tile_band = rows * GRID + self.chain_y[owner, chain]
+            drawn[tile_band] = True
+        band_of = np.flatnonzero(drawn)
+        if len(band_of) == 0:
+            return
+        band_slots = band_of // GRID
+        edge = np.empty((len(band_of), BAND_WIDTH, 3), dtype=np.uint8)
+        middle = np.empty((len(band_of), BAND_WIDTH, 3), dtype=np.uint8)
+        edge[:, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_EDGE[phase[band_slots]]
+        middle[:, BAND_PAD : BAND_PAD + SCREEN] = BACKGROUND_MIDDLE[phase[band_slots]]
+        if most > 0:
             # Each tile's screen column is truncated on its own (pygame cuts float rects toward zero).
             left = np.trunc(self.chain_x[owner, chain] * TILE - self.camera_x[owner]).astype(np.int64)
             left = np.minimum(np.maximum(left, -BAND_PAD), SCREEN) + BAND_PAD
-            start = ((rows * GRID + self.chain_y[owner, chain]) * BAND_WIDTH + left) * 3
-            at = start[:, None] + TILE_BYTE_OFFSETS
+            position = np.cumsum(drawn) - 1  # (row of slots, band) -> its row in edge / middle
+            at = ((position[tile_band] * BAND_WIDTH + left) * 3)[:, None] + TILE_BYTE_OFFSETS
             edge.reshape(-1)[at] = TILE_EDGE_BYTES
             middle.reshape(-1)[at] = TILE_MIDDLE_BYTES
-        bands = self.canvas.bands if isinstance(idx, slice) else np.empty((m, GRID, TILE, SCREEN, 3), np.uint8)
+        frame_slots, bands = slots[band_slots], band_of % GRID
         visible = slice(BAND_PAD, BAND_PAD + SCREEN)
-        bands[:, :, 0] = edge[:, :, visible]
-        bands[:, :, TILE - 1] = edge[:, :, visible]
-        bands[:, :, 1 : TILE - 1] = middle[:, :, None, visible]
-        if not isinstance(idx, slice):
-            self.canvas.view[idx] = bands.reshape(m, SCREEN, SCREEN, 3)
+        target = self.canvas.bands
+        target[frame_slots, bands, 0] = edge[:, visible]
+        target[frame_slots, bands, TILE - 1] = edge[:, visible]
+        target[frame_slots, bands, 1 : TILE - 1] = middle[:, None, visible]
 
     # ------------------------------------------------------------------------------------------ outputs
     def _observation(self, idx: Index) -> np.ndarray:
