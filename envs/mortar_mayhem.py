@@ -167,6 +167,32 @@ def command_walk(size: int, allowed: int) -> tuple[tuple[tuple[int, ...], tuple[
     return tuple(steps)
 
 
+def walk_commands(draws: BoundedDraws, walk: tuple, tile: int, count: int) -> list[int]:
+    """``count`` commands of a walk from ``tile`` that stays inside the arena (``walk = command_walk(...)``), each
+    drawn as ``rng.choice`` of the commands valid there.
+
+    The hot loop of a reset, so Lemire's method runs inline on the drawn words: a product whose low 32 bits are at
+    least n is never rejected (almost always, for n <= 9); any other word goes to ``draws.below``, which decides
+    exactly (and draws another word when numpy would).
+    """
+    words, used, walked = draws.words, draws.used, []
+    for _ in range(count):
+        valid, leads_to = walk[tile]
+        n = len(valid)
+        product = words[used] * n if used < len(words) else 0
+        if product & 0xFFFFFFFF >= n:
+            pick = product >> 32
+            used += 1
+        else:
+            draws.used = used
+            pick = draws.below(n)
+            used = draws.used
+        walked.append(valid[pick])
+        tile = leads_to[pick]
+    draws.used = used
+    return walked
+
+
 # ------------------------------------------------------------------------------------------------- movement
 # Movement runs through transition tables built once per configuration from the shared movement rules, so a step
 # is a few gathers for any number of slots. Free movement: a key per slot and axis encodes (config, coordinate,
@@ -463,13 +489,8 @@ class MortarMayhemCore(BatchedCore):
                 draws.reserve(count + choices)
             if walk is None:  # endless: uniform over the allowed commands, no validity filter (the targets wrap)
                 walked = [draws.below(allowed) for _ in range(count)]
-            else:  # a walk that stays inside the arena
-                walked, tile = [], start_x * size + start_y
-                for _ in range(count):
-                    valid, leads_to = walk[tile]
-                    pick = draws.below(len(valid))
-                    walked.append(valid[pick])
-                    tile = leads_to[pick]
+            else:
+                walked = walk_commands(draws, walk, tile, count)
             picks = [int(values[draws.below(len(values))]) for values in lists]
             draws.close()
             duration, delay = picks[:2] if self.clue_phase else (0, 0)

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import envs
-from envs.mortar_mayhem import MortarMayhemCore
+from envs.mortar_mayhem import MortarMayhemCore, command_walk, walk_commands
+from envs.rng import BoundedDraws, seeded_generator
 from tests.batching import check_batched_equals_singles
 
 MM, MM_GRID, MMB, MMB_GRID, EMM = (
@@ -529,3 +530,28 @@ def test_reset_slots_with_a_repeated_slot_keeps_its_last_level() -> None:
     np.testing.assert_array_equal(together.frames, one_by_one.frames)
     np.testing.assert_array_equal(together.vector, one_by_one.vector)
     np.testing.assert_array_equal(together.target, one_by_one.target)
+
+
+@pytest.mark.parametrize(("size", "allowed"), [(2, 4), (3, 5), (5, 9)])
+def test_walk_commands_inline_draws_equal_bounded_draws(size: int, allowed: int) -> None:
+    """The walk's inline Lemire step equals BoundedDraws.below, also for words it hands over: 0 (rejected for
+    n = 3, 5, ...: numpy draws again) and 1 (low bits == n: accepted at once)."""
+    walk, count = command_walk(size, allowed), 12
+    draws = []
+    for _ in range(2):
+        d = BoundedDraws(seeded_generator(7), reserve=count, fresh=True)
+        d.words[2], d.words[3], d.words[7] = 0, 1, 0
+        draws.append(d)
+    fast, slow = draws
+    walked = walk_commands(fast, walk, 0, count)
+    expected, tile = [], 0
+    for _ in range(count):
+        valid, leads_to = walk[tile]
+        pick = slow.below(len(valid))
+        expected.append(valid[pick])
+        tile = leads_to[pick]
+    assert walked == expected
+    assert fast.words == slow.words and fast.used == slow.used
+    fast.close()
+    slow.close()
+    assert fast.rng.bit_generator.state == slow.rng.bit_generator.state
