@@ -167,7 +167,7 @@ class RecurrentMemory(nn.Module):
 
     def step(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
         """One step of ``B`` environments: features (B, F), state (B, *state_shape)."""
-        if self.kind == "gru":  # a packed batch of B sequences of one step; every layer's output is its new state
+        if self._packed_gru(features):  # a packed batch of B one-step sequences; each layer's output is its new state
             dtype = compute_dtype(self.rnn.weight_ih_l0)
             states, layer_input = [], features
             for layer, h0 in enumerate(state.transpose(0, 1)):
@@ -192,7 +192,7 @@ class RecurrentMemory(nn.Module):
         time_major = row[order].T[sorted_mask.T]  # packed order: step t of every sequence longer than t
         batch_sizes = sorted_mask.sum(dim=0).cpu()
         batch_sizes = batch_sizes[batch_sizes > 0]
-        if self.kind == "gru":
+        if self._packed_gru(features):
             dtype = compute_dtype(self.rnn.weight_ih_l0)
             layer_input = features[time_major]
             for layer in range(self.rnn.num_layers):
@@ -205,6 +205,11 @@ class RecurrentMemory(nn.Module):
         result = torch.empty_like(output)
         result[time_major] = output
         return result
+
+    def _packed_gru(self, features: Tensor) -> bool:
+        """Whether the GRU runs through :func:`packed_gru`: on the CPU, where ``nn.GRU``'s packed backward works step
+        by step; elsewhere ``nn.GRU`` (cuDNN's fused kernels on CUDA) is the faster one."""
+        return self.kind == "gru" and features.device.type == "cpu"
 
     def _to_rnn(self, state: Tensor) -> Tensor | tuple[Tensor, Tensor]:
         if self.kind == "gru":

@@ -225,3 +225,17 @@ def test_packed_gru_under_bfloat16_autocast_stays_close_to_float32() -> None:
         mixed = memory.sequences(features, start, mask)
     assert mixed.dtype == torch.float32
     assert (mixed - exact).abs().max() < 0.05
+
+
+def test_the_nn_gru_path_used_off_the_cpu_agrees_with_the_packed_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Off the CPU (CUDA) RecurrentMemory runs nn.GRU itself; run that path here and compare step and sequences."""
+    torch.manual_seed(5)
+    memory = RecurrentMemory("gru", 6, 8, 2)
+    mask = torch.arange(7)[None] < torch.tensor([7, 2, 5])[:, None]
+    features, start = torch.randn(int(mask.sum()), 6), torch.randn(3, 2, 8)
+    packed = memory.sequences(features, start, mask), memory.step(features[:3], start)
+    monkeypatch.setattr(RecurrentMemory, "_packed_gru", lambda self, features: False)
+    nn_path = memory.sequences(features, start, mask), memory.step(features[:3], start)
+    torch.testing.assert_close(packed[0], nn_path[0], rtol=1e-5, atol=1e-6)
+    for ours, theirs in zip(packed[1], nn_path[1], strict=True):
+        torch.testing.assert_close(ours, theirs, rtol=1e-5, atol=1e-6)
