@@ -73,41 +73,27 @@ def test_policy_loss_has_one_ratio_per_action_dimension() -> None:
 
 
 def test_value_loss_clipping_and_total() -> None:
-    values, old, returns = torch.tensor([1.0, 0.0]), torch.tensor([0.0, 0.0]), torch.tensor([0.0, 1.0])
-    loss, a = _loss(
-        values=values,
-        old_values=old,
-        returns=returns,
-        advantages=torch.zeros(2),
-        log_probs=torch.zeros(2, 2),
-        old_log_probs=torch.zeros(2, 2),
-        entropy=torch.tensor([1.0, 3.0]),
-    )
+    def two_steps(values: list[float], returns: list[float], **overrides: object):
+        """Two steps with old values 0, zero advantages and log-ratios, entropies 1 and 3."""
+        loss, _ = _loss(
+            values=torch.tensor(values),
+            old_values=torch.zeros(2),
+            returns=torch.tensor(returns),
+            advantages=torch.zeros(2),
+            log_probs=torch.zeros(2, 2),
+            old_log_probs=torch.zeros(2, 2),
+            entropy=torch.tensor([1.0, 3.0]),
+            **overrides,
+        )
+        return loss
+
+    loss = two_steps([1.0, 0.0], [0.0, 1.0])
     # step 0: unclipped error 1, clipped value 0.2 -> error 0.04; the max keeps 1.
     # step 1: unclipped 1, clipped value 0 -> error 1.
     assert float(loss.value) == pytest.approx(1.0)
-    values = torch.tensor([0.5, 0.0])
-    returns = torch.tensor([1.0, 0.0])
-    loss, _ = _loss(
-        values=values,
-        old_values=old,
-        returns=returns,
-        advantages=torch.zeros(2),
-        log_probs=torch.zeros(2, 2),
-        old_log_probs=torch.zeros(2, 2),
-        entropy=torch.tensor([1.0, 3.0]),
-    )
+    loss = two_steps([0.5, 0.0], [1.0, 0.0])
     assert float(loss.value) == pytest.approx((0.8**2 + 0.0) / 2)  # clipped (0.2 from 1.0) is the larger error
-    unclipped, _ = _loss(
-        values=values,
-        old_values=old,
-        returns=returns,
-        advantages=torch.zeros(2),
-        log_probs=torch.zeros(2, 2),
-        old_log_probs=torch.zeros(2, 2),
-        entropy=torch.tensor([1.0, 3.0]),
-        clip_value_loss=False,
-    )
+    unclipped = two_steps([0.5, 0.0], [1.0, 0.0], clip_value_loss=False)
     assert float(unclipped.value) == pytest.approx(0.5**2 / 2)
     assert float(unclipped.total) == pytest.approx(0.0 + 0.25 * 0.125 - 0.01 * 2.0)
 
