@@ -192,19 +192,20 @@ class RecurrentMemory(nn.Module):
         time_major = row[order].T[sorted_mask.T]  # packed order: step t of every sequence longer than t
         batch_sizes = sorted_mask.sum(dim=0).cpu()
         batch_sizes = batch_sizes[batch_sizes > 0]
+        packed_rows = features.index_select(0, time_major)  # gathers of whole rows, both ways (no scatter)
         if self._packed_gru(features):
             dtype = compute_dtype(self.rnn.weight_ih_l0)
-            layer_input = features[time_major]
+            layer_input = packed_rows
             for layer in range(self.rnn.num_layers):
                 h0 = start_state[order, layer][None]
                 layer_input = packed_gru(self.rnn, layer_input, h0, batch_sizes.tolist(), dtype, layer)
             output = layer_input.to(features.dtype)
         else:
-            packed = PackedSequence(features[time_major], batch_sizes, order, torch.argsort(order))
+            packed = PackedSequence(packed_rows, batch_sizes, order, torch.argsort(order))
             output = self.rnn(packed, self._to_rnn(start_state.to(features.dtype)))[0].data
-        result = torch.empty_like(output)
-        result[time_major] = output
-        return result
+        sequence_order = torch.empty_like(time_major)
+        sequence_order[time_major] = torch.arange(time_major.shape[0], device=time_major.device)
+        return output.index_select(0, sequence_order)
 
     def _packed_gru(self, features: Tensor) -> bool:
         """Whether the GRU runs through :func:`packed_gru`: on the CPU, where ``nn.GRU``'s packed backward works step

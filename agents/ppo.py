@@ -119,20 +119,22 @@ def ppo_update(
             index = batch.step_index
             with autocast():
                 logits, values = model.evaluate(
-                    {name: tensor[index] for name, tensor in inputs.items()}, states[batch.start_index], batch.mask
+                    {name: rows(tensor, index) for name, tensor in inputs.items()},
+                    rows(states, batch.start_index),
+                    batch.mask,
                 )
-            log_probs, entropy = log_probs_and_entropy(logits, actions[index])
-            minibatch_advantages = advantages[index]
+            log_probs, entropy = log_probs_and_entropy(logits, rows(actions, index))
+            minibatch_advantages = rows(advantages, index)
             if config.advantage_normalization == "minibatch":
                 minibatch_advantages = normalize(minibatch_advantages)
             loss = ppo_loss(
                 log_probs,
-                old_log_probs[index],
+                rows(old_log_probs, index),
                 minibatch_advantages,
                 entropy,
                 values,
-                old_values[index],
-                returns[index],
+                rows(old_values, index),
+                rows(returns, index),
                 clip,
                 config.clip_value_loss,
                 config.value_coef,
@@ -156,6 +158,12 @@ def ppo_update(
                 totals[name] = totals.get(name, 0.0) + value.detach() * batch.num_steps
             steps_seen += batch.num_steps
     return {name: float(total) / steps_seen for name, total in totals.items()}
+
+
+def rows(tensor: Tensor, index: Tensor) -> Tensor:
+    """``tensor[index]`` for an int64 index of rows. ``index_select`` copies whole rows at once: for the minibatch's
+    images it is ~8x faster than advanced indexing, which goes element by element."""
+    return tensor.index_select(0, index)
 
 
 def explained_variance(values: Tensor, returns: Tensor) -> float:
