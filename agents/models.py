@@ -297,9 +297,18 @@ class ActorCritic(nn.Module):
 
     def evaluate(self, inputs: dict[str, Tensor], start_state: Tensor, mask: Tensor) -> tuple[list[Tensor], Tensor]:
         """Training: the N real steps of S sequences (flat, in sequence order), their start states (S, ...) and
-        their padding mask (S, P). Returns logits and values of the N steps."""
-        output = self.memory.sequences(self.encode(inputs), start_state, mask)
-        return self.heads(output)
+        their padding mask (S, P). Returns logits and values of the N steps.
+
+        ``inputs`` may hold filler rows after the N real ones (see :func:`agents.ppo.filled_index`): they pass
+        through the layers that act on single steps, so those keep a few fixed shapes, but they never enter the
+        memory and are dropped from the outputs, so they change no output and no gradient."""
+        features = self.encode(inputs)
+        real_steps = int(mask.sum())
+        output = self.memory.sequences(features[:real_steps], start_state, mask)
+        if features.shape[0] > real_steps:
+            output = torch.cat((output, output.new_zeros(features.shape[0] - real_steps, *output.shape[1:])))
+        logits, values = self.heads(output)
+        return [branch[:real_steps] for branch in logits], values[:real_steps]
 
 
 # --------------------------------------------------------------------------------------- action distribution

@@ -35,6 +35,7 @@ import numpy as np  # noqa: E402
 
 from agents.config import Config, load_config  # noqa: E402
 from agents.models import log_probs_and_entropy  # noqa: E402
+from agents.ppo import filled_index, rows  # noqa: E402
 from agents.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
 from agents.trainer import Trainer, atomic_write_bytes, git_revision, machine_info, versions  # noqa: E402
 
@@ -79,7 +80,7 @@ def network_bound(trainer: Trainer) -> float:
         for ids in minibatch_ids(len(sequences), config.ppo.minibatches, rng):
             batch = pad_sequences(sequences, ids, device=buffer.device)
             index = batch.step_index
-            gathered = {name: tensor[index] for name, tensor in inputs.items()}
+            gathered = {name: rows(tensor, filled_index(index)) for name, tensor in inputs.items()}
             minibatches.append((gathered, states[batch.start_index], batch.mask, actions[index]))
         epochs.append(minibatches)
     started = time.perf_counter()

@@ -18,6 +18,7 @@ from agents.models import (
     model_inputs,
     sample_actions,
 )
+from agents.ppo import filled_index
 from agents.sequences import pad_sequences, split_sequences
 
 IMAGE = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
@@ -176,6 +177,36 @@ def test_padding_changes_no_output_and_no_gradient(memory: str) -> None:
         torch.testing.assert_close(padded_loss, loss, atol=1e-6, rtol=1e-6)
         for a, b in zip(padded_grads, grads, strict=True):
             torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
+
+
+@pytest.mark.parametrize("memory", ["none", "gru"])
+def test_filler_rows_change_no_output_and_no_gradient(memory: str) -> None:
+    """The PPO update rounds a minibatch's rows up with filler (filled_index): same outputs, loss and gradients."""
+    model = _model(memory, previous_action=True, previous_reward=True)
+    terminated, workers, steps = _episode_layout()
+    sequences = split_sequences(terminated, None if memory != "none" else 1)
+    inputs = _inputs(model, workers * steps, seed=5)
+    states = torch.randn(workers * steps, *model.state_shape, generator=torch.Generator().manual_seed(6))
+    batch = pad_sequences(sequences, np.arange(len(sequences)))
+    assert batch.num_steps % 8 != 0, "the layout must need filler for this test to mean anything"
+
+    def run(index: torch.Tensor) -> tuple[list[torch.Tensor], torch.Tensor, list[torch.Tensor]]:
+        model.zero_grad()
+        logits, values = model.evaluate({k: v[index] for k, v in inputs.items()}, states[batch.start_index], batch.mask)
+        (values.square().mean() + sum(x.logsumexp(-1).mean() for x in logits)).backward()
+        return logits, values, [p.grad.clone() for p in model.parameters()]
+
+    filled = filled_index(batch.step_index)
+    assert filled.shape[0] % 8 == 0 and filled.shape[0] > batch.num_steps
+    assert torch.equal(filled[: batch.num_steps], batch.step_index)
+    logits, values, grads = run(batch.step_index)
+    filled_logits, filled_values, filled_grads = run(filled)
+    assert values.shape == filled_values.shape and len(filled_logits) == len(logits)
+    torch.testing.assert_close(filled_values, values, atol=1e-6, rtol=1e-6)
+    for a, b in zip(filled_logits, logits, strict=True):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
+    for a, b in zip(filled_grads, grads, strict=True):
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
 
 
 @pytest.mark.parametrize("layers", [1, 2])
