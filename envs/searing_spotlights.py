@@ -509,6 +509,34 @@ SETTINGS = np.dtype(
     ]
 )
 
+# The state of a slot's episode; a reset writes one start record per distinct option set (see ``_derive_settings``)
+# and then the drawn level.
+EPISODE = np.dtype(
+    [
+        ("t", np.int64),
+        ("end_t_now", np.int64),  # the episode ends at this step (the endless coin clock moves it)
+        ("heading", np.int64),
+        ("pos", np.int64, (2,)),  # agent centre (x, y)
+        ("health", np.float64),
+        ("hud_red", np.int64),  # width of the red (lost health) part of the bar
+        ("hit", bool),
+        ("next_spawn", np.int64),
+        ("spawns_left", np.int64),
+        ("spot_count", np.int64),
+        ("coins_collected", np.int64),
+        ("coins_left", np.int64),
+        ("num_coins", np.int64),
+        ("coin_shown_until", np.int64),
+        ("special_until", np.int64),  # entities are drawn above the darkness before this step
+        ("success", np.int64),
+        ("exit_x", np.int64),
+        ("exit_y", np.int64),
+        ("exit_open", bool),
+        ("goal_without_exit", bool),  # no exit: the episode ends with the last coin
+        ("next_hud", np.int64),
+    ]
+)
+
 # A slot's spotlights in list order. An unused position is never drawn (radius 0), never hits (negative reach),
 # never moves (speed 0) and sits at the screen centre, inside the hole tables.
 SPOTS = np.dtype(
@@ -581,19 +609,11 @@ class SearingSpotlightsCore(BatchedCore):
         self._settings_cache: dict[tuple, tuple[np.void, dict]] = {}
         # episode state
         i64 = np.int64
-        for name in (
-            "t end_t_now heading next_spawn spawns_left coins_collected coins_left num_coins "
-            "coin_shown_until special_until success exit_x exit_y next_hud"
-        ).split():
-            setattr(self, name, np.zeros(n, i64))
-        self.pos = np.zeros((n, 2), i64)  # agent centre (x, y)
+        self.episode = np.zeros(n, EPISODE)
+        for name in EPISODE.names:  # attribute views of the state columns
+            setattr(self, name, self.episode[name])
         self.x, self.y = self.pos[:, 0], self.pos[:, 1]
-        self.health = np.zeros(n, np.float64)
-        self.hud_red = np.zeros(n, i64)  # width of the red (lost health) part of the bar
         self.hud = np.zeros((n, ROW_BYTES), np.uint8)  # the HUD row of the current frame
-        self.hit = np.zeros(n, bool)
-        self.exit_open = np.zeros(n, bool)
-        self.goal_without_exit = np.zeros(n, bool)  # no exit: the episode ends with the last coin
         self.coin_x = np.zeros((n, 1), i64)
         self.coin_y = np.zeros((n, 1), i64)
         self.coin_alive = np.zeros((n, 1), bool)
@@ -602,7 +622,6 @@ class SearingSpotlightsCore(BatchedCore):
         self.tables = hole_tables(int(self.base_options["spot_max_radius"]))
         self.unused_spot = self._unused_spot_record()
         self.spots = np.zeros((n, 0), SPOTS)
-        self.spot_count = np.zeros(n, i64)
         self.drawn_is_listed = False  # the "drawn" column equals "listed" for every slot
         self._grow_spots(8)
         # pictures, as (84, 252) rows per slot
@@ -629,8 +648,9 @@ class SearingSpotlightsCore(BatchedCore):
                 raise ValueError(f"option {low!r}={opts[low]!r} is invalid: expected a value <= {high}={opts[high]!r}")
         return opts
 
-    def _episode_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
-        """The settings record and draw orders for ``opts`` (cached: most episodes share their options)."""
+    def _episode_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict, np.void]:
+        """The settings record, draw orders and episode start record for ``opts`` (cached: most episodes share
+        their options)."""
         if opts is self._defaults:
             key = None
         else:
@@ -642,7 +662,7 @@ class SearingSpotlightsCore(BatchedCore):
             cached = self._settings_cache[key] = self._derive_settings(opts)
         return cached
 
-    def _derive_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
+    def _derive_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict, np.void]:
         endless = self.endless
         record = np.zeros((), SETTINGS)
         radius = int(25 * opts["agent_scale"])
@@ -698,7 +718,18 @@ class SearingSpotlightsCore(BatchedCore):
                 entities.pop(1)  # no exit at all (the reference would draw a stale one, or fail)
             order = draw_order(entities)
             orders = {False: order, True: order}
-        return record[()], orders
+        start = np.zeros((), EPISODE)  # what the level draws (heading, positions, coins, exit) is written later
+        start["end_t_now"] = min(record["end_t"], record["steps_per_coin"]) if endless else record["end_t"]
+        start["health"] = opts["agent_health"]
+        start["next_spawn"] = record["spawn_interval"] if endless or opts["num_spawns"] > 0 else NEVER
+        start["spawns_left"] = 0 if endless else opts["num_spawns"]
+        start["spot_count"] = opts["initial_spawns"]
+        start["num_coins"] = start["coins_left"] = 1 if endless else 0
+        start["coin_shown_until"] = record["coin_show_duration"]
+        shown = record["coin_show_duration"] if endless else 0
+        start["special_until"] = NEVER if record["any_visible"] else shown
+        start["next_hud"] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
+        return record[()], orders, start[()]
 
     # ------------------------------------------------------------------------------------------- spotlights
     def _unused_spot_record(self) -> np.void:
@@ -747,36 +778,20 @@ class SearingSpotlightsCore(BatchedCore):
     # --------------------------------------------------------------------------------------------- reset
     def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
         """New episodes with the same options: per-slot draws in the reference's order, the rest for all at once."""
-        record, orders = self._episode_settings(opts)
+        record, orders, start = self._episode_settings(opts)
         idx = np.array(slots, dtype=np.int64)
         self.settings[idx] = record
+        self.episode[idx] = start
         for k in slots:
             self.orders[k] = orders
         self._use_tables(int(opts["spot_max_radius"]))
-        self.t[idx] = 0
-        self.end_t_now[idx] = record["end_t"]
-        self.hit[idx] = False
-        self.hud_red[idx] = 0
-        self.next_spawn[idx] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
-        self.spawns_left[idx] = 0 if self.endless else opts["num_spawns"]
-        self.coins_collected[idx] = 0
-        self.success[idx] = 0
-        self.coin_shown_until[idx] = record["coin_show_duration"]
-        shown = record["coin_show_duration"] if self.endless else 0
-        self.special_until[idx] = NEVER if record["any_visible"] else shown
-        self.exit_open[idx] = False
-        self.health[idx] = opts["agent_health"]
         count = opts["initial_spawns"]
         if count > self.spots.shape[1]:
             self._grow_spots(max(count, 2 * self.spots.shape[1]))
         self.spots[idx, count:] = self.unused_row[count:]
-        self.spot_count[idx] = count
         self.drawn_is_listed = False
         self.item_map[idx] = 0
-        if self.endless:
-            self.num_coins[idx] = self.coins_left[idx] = 1
-            self.end_t_now[idx] = min(record["end_t"], record["steps_per_coin"])
-        else:
+        if not self.endless:
             most = max(opts["num_coins"], default=0)
             if most > self.coin_x.shape[1]:
                 grow = ((0, 0), (0, most - self.coin_x.shape[1]))
@@ -790,7 +805,6 @@ class SearingSpotlightsCore(BatchedCore):
             draws.close()
         if count:
             self.spots[idx, :count] = np.array(spots, SPOTS).reshape(len(slots), count)
-        self.next_hud[idx] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
         self.hud[idx] = reset_hud_row(
             self.endless, bool(opts["show_last_action"]), bool(opts["show_last_positive_reward"])
         )
@@ -905,14 +919,13 @@ class SearingSpotlightsCore(BatchedCore):
         return rewards, terminated
 
     def _spawn_spots(self, slots: np.ndarray) -> None:
-        for k in slots:
-            k = int(k)
+        for k in slots.tolist():
             self._append_spot(k)
-            self.next_spawn[k] += self.spawn_interval[k]
-            if not self.endless:
-                self.spawns_left[k] -= 1
-                if self.spawns_left[k] == 0:
-                    self.next_spawn[k] = NEVER
+        self.next_spawn[slots] += self.spawn_interval[slots]
+        if not self.endless:
+            left = self.spawns_left[slots] - 1
+            self.spawns_left[slots] = left
+            self.next_spawn[slots[left == 0]] = NEVER
 
     def _item_events(
         self,
@@ -1283,9 +1296,8 @@ class SearingSpotlightsCore(BatchedCore):
             blended = np.bitwise_xor(dark, lit)  # the lit picture in the holes, the darkened one elsewhere
             blended &= holes
             blended ^= dark
-            for i, k in enumerate(slots):
-                if self.rings[k]:
-                    self._draw_rings(int(k), blended[i], lit[i])
+            for i in np.flatnonzero(self.rings[slots]).tolist():
+                self._draw_rings(int(slots[i]), blended[i], lit[i])
             lit = blended
         out[local] = lit
 
