@@ -807,13 +807,10 @@ class SearingSpotlightsCore(BatchedCore):
                 self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
                 self.coin_alive = np.pad(self.coin_alive, grow)
             self.coin_alive[idx] = False
-        spots = []
         for k, rng in zip(slots, rngs, strict=True):
             draws = StreamDraws(rng)
-            spots += self._draw_level(k, draws, opts)
+            self._draw_level(k, draws, opts)
             draws.close()
-        if count:
-            as_bytes(self.spots)[idx, :count] = as_bytes(np.array(spots, SPOTS)).reshape(len(slots), count)
         self.hud[idx] = reset_hud_row(
             self.endless, bool(opts["show_last_action"]), bool(opts["show_last_positive_reward"])
         )
@@ -834,8 +831,8 @@ class SearingSpotlightsCore(BatchedCore):
         self._finish_frames(idx, out)
         self.frames[idx] = out[:-1]
 
-    def _draw_level(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> list[tuple]:
-        """Slot k's agent, coins and exit, with the reference's draws in its order; returns the first spotlights."""
+    def _draw_level(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> None:
+        """Slot k's agent, first spotlights, coins and exit, with the reference's draws in its order."""
         mask = np.zeros((SCREEN, SCREEN), bool)
         self.heading[k] = draws.integers(0, 8)  # heading index (x 45 degrees): what rng.choice draws
         if opts["sample_agent_position"]:
@@ -845,10 +842,12 @@ class SearingSpotlightsCore(BatchedCore):
             x, y = CENTRE, CENTRE
             block_position(mask, x, y, ITEM_BLOCK)
         self.pos[k] = x, y
-        spots = [self._new_spot(k, draws, opts) for _ in range(opts["initial_spawns"])]
+        spots = self.spots[k]
+        for j in range(opts["initial_spawns"]):
+            spots[j] = self._new_spot(k, draws, opts)  # (a record from a tuple: fast, unlike arrays of records)
         if self.endless:
             self._spawn_endless_coin(k, draws, previous=None)
-            return spots
+            return
         counts = opts["num_coins"]
         num_coins = int(counts[draws.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
         self.num_coins[k] = self.coins_left[k] = num_coins
@@ -863,7 +862,6 @@ class SearingSpotlightsCore(BatchedCore):
             self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
             if num_coins == 0:
                 self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
-        return spots
 
     def alpha(self, slots: np.ndarray | int) -> np.ndarray:
         """The darkness alpha of the slots' current frames."""
