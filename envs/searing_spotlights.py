@@ -298,12 +298,67 @@ def hud_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------------------------------------ sampler
-def uniform(rng: np.random.Generator, low: float, high: float) -> float:
-    """``rng.uniform(low, high)`` (same value, same generator state) at a fraction of its cost: numpy computes
-    ``low + (high - low) * next_double``, and a double is the top 53 bits of the next 64-bit output, which PCG64
-    takes without touching a buffered 32-bit half (as ``random_raw`` does)."""
-    low, high = float(low), float(high)
-    return low + (high - low) * ((int(rng.bit_generator.random_raw()) >> 11) * (1.0 / 9007199254740992.0))
+class StreamDraws:
+    """``rng.integers(low, high)`` and ``rng.uniform(low, high)`` values, in any order, from 64-bit outputs read
+    ahead in bulk; :meth:`close` leaves the generator exactly where the one-by-one calls would have.
+
+    Why it is exact: numpy draws a bounded int (range up to 2**32) with Lemire's method on 32-bit words, and PCG64
+    hands out the low, then the high half of each 64-bit output, keeping an unused high half in its state
+    (``has_uint32``/``uinteger``). A double is the top 53 bits of the next whole output and leaves a kept half alone.
+    A level makes ~25 such draws: one read-ahead and one rewind replace ~25 numpy calls of a few microseconds.
+    """
+
+    BLOCK = 32  # outputs per read-ahead (a default level uses ~20)
+
+    __slots__ = ("bit_generator", "saved", "outputs", "used", "half", "has_half")
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        if not isinstance(rng.bit_generator, np.random.PCG64):
+            raise TypeError(f"StreamDraws reproduces PCG64 streams; got {type(rng.bit_generator).__name__}")
+        self.bit_generator = rng.bit_generator
+        self.saved = self.bit_generator.state
+        # numpy's kept high half (``uinteger``, stale once used) and whether it is still to be used (``has_uint32``)
+        self.half, self.has_half = self.saved["uinteger"], bool(self.saved["has_uint32"])
+        self.outputs: list[int] = self.bit_generator.random_raw(self.BLOCK).tolist()
+        self.used = 0  # outputs taken
+
+    def _output(self) -> int:
+        if self.used == len(self.outputs):
+            self.outputs += self.bit_generator.random_raw(self.BLOCK).tolist()
+        self.used += 1
+        return self.outputs[self.used - 1]
+
+    def integers(self, low: float, high: float) -> int:
+        """The value of ``rng.integers(low, high)`` (float bounds are truncated, as numpy does)."""
+        low, span = int(low), int(high) - int(low)
+        if not 1 <= span <= 1 << 32:
+            raise ValueError(f"integers({low}, {high}): expected 1 <= high - low <= 2**32")
+        if span == 1:
+            return low  # numpy draws nothing when there is only one choice
+        while True:
+            if self.has_half:
+                word, self.has_half = self.half, False
+            else:
+                word = self._output()
+                self.half, self.has_half, word = word >> 32, True, word & 0xFFFFFFFF
+            product = word * span
+            low_bits = product & 0xFFFFFFFF
+            # Lemire: a low part below (2**32 - span) % span would bias the result, so numpy draws again
+            if low_bits >= span or low_bits >= ((1 << 32) - span) % span:
+                return low + (product >> 32)
+
+    def uniform(self, low: float, high: float) -> float:
+        """The value of ``rng.uniform(low, high)``: ``low + (high - low) * next_double``."""
+        low, high = float(low), float(high)
+        return low + (high - low) * ((self._output() >> 11) * (1.0 / 9007199254740992.0))
+
+    def close(self) -> None:
+        """Rewind the generator to just after the outputs taken, keeping an unused half as numpy would."""
+        state = dict(self.saved)
+        state["has_uint32"], state["uinteger"] = int(self.has_half), self.half
+        self.bit_generator.state = state
+        if self.used:
+            self.bit_generator.random_raw(self.used)
 
 
 @cache
@@ -337,7 +392,9 @@ def block_position(mask: np.ndarray, x: int, y: int, radius: int) -> None:
         mask[r0:r1, c0:c1] |= disc[r0 - top : r1 - top, c0 - left : c1 - left]
 
 
-def sample_position(mask: np.ndarray, rng: np.random.Generator, radius: int, empty: bool = False) -> tuple[int, int]:
+def sample_position(
+    mask: np.ndarray, rng: np.random.Generator | StreamDraws, radius: int, empty: bool = False
+) -> tuple[int, int]:
     """A uniformly drawn free pixel (row-major order of the free ones), which is then blocked with ``radius``.
 
     ``empty`` says that nothing is blocked yet, so the drawn index is the pixel itself.
@@ -414,6 +471,13 @@ def alpha_schedule(duration: int, threshold: int) -> np.ndarray:
     return np.array(schedule, np.int16)
 
 
+def as_bytes(records: np.ndarray | np.void) -> np.ndarray:
+    """The same records as opaque items of their size: whole-record copies then skip numpy's field-by-field casts
+    (a fancy-indexed structured assignment costs tens of microseconds; as bytes, a fraction of one)."""
+    records = np.asarray(records)
+    return records.view(np.dtype((np.void, records.dtype.itemsize)))
+
+
 # Per-episode settings of a slot, derived once per distinct set of options (see ``_episode_settings``).
 SETTINGS = np.dtype(
     [
@@ -449,7 +513,37 @@ SETTINGS = np.dtype(
         ("coin_reach", np.int64),  # coin radius + agent radius
         ("exit_scale", np.float64),
         ("exit_reach", np.float64),  # exit radius + agent radius
-    ]
+    ],
+    align=True,  # padded: every field aligned in every record (unaligned fields take slower numpy loops)
+)
+
+# The state of a slot's episode; a reset writes one start record per distinct option set (see ``_derive_settings``)
+# and then the drawn level.
+EPISODE = np.dtype(
+    [
+        ("t", np.int64),
+        ("end_t_now", np.int64),  # the episode ends at this step (the endless coin clock moves it)
+        ("heading", np.int64),
+        ("pos", np.int64, (2,)),  # agent centre (x, y)
+        ("health", np.float64),
+        ("hud_red", np.int64),  # width of the red (lost health) part of the bar
+        ("hit", bool),
+        ("next_spawn", np.int64),
+        ("spawns_left", np.int64),
+        ("spot_count", np.int64),
+        ("coins_collected", np.int64),
+        ("coins_left", np.int64),
+        ("num_coins", np.int64),
+        ("coin_shown_until", np.int64),
+        ("special_until", np.int64),  # entities are drawn above the darkness before this step
+        ("success", np.int64),
+        ("exit_x", np.int64),
+        ("exit_y", np.int64),
+        ("exit_open", bool),
+        ("goal_without_exit", bool),  # no exit: the episode ends with the last coin
+        ("next_hud", np.int64),
+    ],
+    align=True,  # padded: every field aligned in every record (unaligned fields take slower numpy loops)
 )
 
 # A slot's spotlights in list order. An unused position is never drawn (radius 0), never hits (negative reach),
@@ -468,7 +562,8 @@ SPOTS = np.dtype(
         ("done", bool),
         ("listed", bool),
         ("drawn", bool),
-    ]
+    ],
+    align=True,  # padded: every field aligned in every record (unaligned fields take slower numpy loops)
 )
 
 # Bits of the per-slot item map: which coins (bits 0..9) and whether the exit (bit 14) touch an agent centred on a
@@ -521,22 +616,14 @@ class SearingSpotlightsCore(BatchedCore):
         self.orders: list[dict[bool, tuple[tuple[str, ...], tuple[str, ...]]]] = [{} for _ in range(n)]
         self.agent_sprites = SpriteScatter()  # every agent scale met so far (settings hold the first id)
         self.coin_sprites = SpriteScatter()  # every coin scale met so far
-        self._settings_cache: dict[tuple, tuple[np.void, dict]] = {}
+        self._settings_cache: dict[tuple, tuple] = {}
         # episode state
         i64 = np.int64
-        for name in (
-            "t end_t_now heading next_spawn spawns_left coins_collected coins_left num_coins "
-            "coin_shown_until special_until success exit_x exit_y next_hud"
-        ).split():
-            setattr(self, name, np.zeros(n, i64))
-        self.pos = np.zeros((n, 2), i64)  # agent centre (x, y)
+        self.episode = np.zeros(n, EPISODE)
+        for name in EPISODE.names:  # attribute views of the state columns
+            setattr(self, name, self.episode[name])
         self.x, self.y = self.pos[:, 0], self.pos[:, 1]
-        self.health = np.zeros(n, np.float64)
-        self.hud_red = np.zeros(n, i64)  # width of the red (lost health) part of the bar
         self.hud = np.zeros((n, ROW_BYTES), np.uint8)  # the HUD row of the current frame
-        self.hit = np.zeros(n, bool)
-        self.exit_open = np.zeros(n, bool)
-        self.goal_without_exit = np.zeros(n, bool)  # no exit: the episode ends with the last coin
         self.coin_x = np.zeros((n, 1), i64)
         self.coin_y = np.zeros((n, 1), i64)
         self.coin_alive = np.zeros((n, 1), bool)
@@ -545,7 +632,6 @@ class SearingSpotlightsCore(BatchedCore):
         self.tables = hole_tables(int(self.base_options["spot_max_radius"]))
         self.unused_spot = self._unused_spot_record()
         self.spots = np.zeros((n, 0), SPOTS)
-        self.spot_count = np.zeros(n, i64)
         self.drawn_is_listed = False  # the "drawn" column equals "listed" for every slot
         self._grow_spots(8)
         # pictures, as (84, 252) rows per slot
@@ -572,8 +658,9 @@ class SearingSpotlightsCore(BatchedCore):
                 raise ValueError(f"option {low!r}={opts[low]!r} is invalid: expected a value <= {high}={opts[high]!r}")
         return opts
 
-    def _episode_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
-        """The settings record and draw orders for ``opts`` (cached: most episodes share their options)."""
+    def _episode_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict, np.void, np.ndarray, np.ndarray]:
+        """The settings record, draw orders and episode start record for ``opts``, and both records as bytes
+        (cached: most episodes share their options)."""
         if opts is self._defaults:
             key = None
         else:
@@ -582,10 +669,12 @@ class SearingSpotlightsCore(BatchedCore):
         if cached is None:
             if len(self._settings_cache) > 256:
                 self._settings_cache.clear()
-            cached = self._settings_cache[key] = self._derive_settings(opts)
+            record, orders, start = self._derive_settings(opts)
+            cached = record, orders, start, as_bytes(record), as_bytes(start)
+            self._settings_cache[key] = cached
         return cached
 
-    def _derive_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict]:
+    def _derive_settings(self, opts: dict[str, Any]) -> tuple[np.void, dict, np.void]:
         endless = self.endless
         record = np.zeros((), SETTINGS)
         radius = int(25 * opts["agent_scale"])
@@ -641,7 +730,18 @@ class SearingSpotlightsCore(BatchedCore):
                 entities.pop(1)  # no exit at all (the reference would draw a stale one, or fail)
             order = draw_order(entities)
             orders = {False: order, True: order}
-        return record[()], orders
+        start = np.zeros((), EPISODE)  # what the level draws (heading, positions, coins, exit) is written later
+        start["end_t_now"] = min(record["end_t"], record["steps_per_coin"]) if endless else record["end_t"]
+        start["health"] = opts["agent_health"]
+        start["next_spawn"] = record["spawn_interval"] if endless or opts["num_spawns"] > 0 else NEVER
+        start["spawns_left"] = 0 if endless else opts["num_spawns"]
+        start["spot_count"] = opts["initial_spawns"]
+        start["num_coins"] = start["coins_left"] = 1 if endless else 0
+        start["coin_shown_until"] = record["coin_show_duration"]
+        shown = record["coin_show_duration"] if endless else 0
+        start["special_until"] = NEVER if record["any_visible"] else shown
+        start["next_hud"] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
+        return record[()], orders, start[()]
 
     # ------------------------------------------------------------------------------------------- spotlights
     def _unused_spot_record(self) -> np.void:
@@ -665,13 +765,13 @@ class SearingSpotlightsCore(BatchedCore):
             self.unused_row = np.full(self.spots.shape[1], self.unused_spot, SPOTS)
             self.spots["base"] = self.tables.base(self.spots["radius"])
 
-    def _new_spot(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> tuple:
+    def _new_spot(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> tuple:
         """A spotlight record: radius, speed, then the three angles (the reference's 5 draws, in its order)."""
-        radius = int(rng.integers(opts["spot_min_radius"], opts["spot_max_radius"] + 1))
-        speed = uniform(rng, opts["spot_min_speed"], opts["spot_max_speed"])
-        start = int(rng.integers(0, 360))
-        target = start + 180 + int(rng.integers(-45, 45))
-        offset = target + int(rng.integers(-135, 135))
+        radius = draws.integers(opts["spot_min_radius"], opts["spot_max_radius"] + 1)
+        speed = draws.uniform(opts["spot_min_speed"], opts["spot_max_speed"])
+        start = draws.integers(0, 360)
+        target = start + 180 + draws.integers(-45, 45)
+        offset = target + draws.integers(-135, 135)
         points = orbit_points(radius)
         start, target, offset = points[start], points[target], points[offset]
         reach = radius + float(self.agent_radius[k])
@@ -681,98 +781,90 @@ class SearingSpotlightsCore(BatchedCore):
         j = int(self.spot_count[k])
         if j == self.spots.shape[1]:
             self._grow_spots(2 * j)
-        self.spots[k, j] = self._new_spot(k, self.rngs[k], self.slot_options[k])
+        draws = StreamDraws(self.rngs[k])
+        self.spots[k, j] = self._new_spot(k, draws, self.slot_options[k])
+        draws.close()
         self.spot_count[k] = j + 1
         self.drawn_is_listed = False
 
     # --------------------------------------------------------------------------------------------- reset
     def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
         """New episodes with the same options: per-slot draws in the reference's order, the rest for all at once."""
-        record, orders = self._episode_settings(opts)
+        record, orders, start, record_bytes, start_bytes = self._episode_settings(opts)
         idx = np.array(slots, dtype=np.int64)
-        self.settings[idx] = record
+        as_bytes(self.settings)[idx] = record_bytes
+        as_bytes(self.episode)[idx] = start_bytes
         for k in slots:
             self.orders[k] = orders
         self._use_tables(int(opts["spot_max_radius"]))
-        self.t[idx] = 0
-        self.end_t_now[idx] = record["end_t"]
-        self.hit[idx] = False
-        self.hud_red[idx] = 0
-        self.next_spawn[idx] = record["spawn_interval"] if self.endless or opts["num_spawns"] > 0 else NEVER
-        self.spawns_left[idx] = 0 if self.endless else opts["num_spawns"]
-        self.coins_collected[idx] = 0
-        self.success[idx] = 0
-        self.coin_shown_until[idx] = record["coin_show_duration"]
-        shown = record["coin_show_duration"] if self.endless else 0
-        self.special_until[idx] = NEVER if record["any_visible"] else shown
-        self.exit_open[idx] = False
-        self.health[idx] = opts["agent_health"]
         count = opts["initial_spawns"]
         if count > self.spots.shape[1]:
             self._grow_spots(max(count, 2 * self.spots.shape[1]))
-        self.spots[idx, count:] = self.unused_row[count:]
-        self.spot_count[idx] = count
+        as_bytes(self.spots)[idx, count:] = as_bytes(self.unused_row[count:])
         self.drawn_is_listed = False
         self.item_map[idx] = 0
-        if self.endless:
-            self.num_coins[idx] = self.coins_left[idx] = 1
-            self.end_t_now[idx] = min(record["end_t"], record["steps_per_coin"])
-        else:
+        if not self.endless:
             most = max(opts["num_coins"], default=0)
             if most > self.coin_x.shape[1]:
                 grow = ((0, 0), (0, most - self.coin_x.shape[1]))
                 self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
                 self.coin_alive = np.pad(self.coin_alive, grow)
             self.coin_alive[idx] = False
-        spots = []
         for k, rng in zip(slots, rngs, strict=True):
-            spots += self._draw_level(k, rng, opts)
-        if count:
-            self.spots[idx, :count] = np.array(spots, SPOTS).reshape(len(slots), count)
-        self.next_hud[idx] = record["hud_flags27"] + 1  # grey no-op action; the reference's last reward is 0.0
+            draws = StreamDraws(rng)
+            self._draw_level(k, draws, opts)
+            draws.close()
         self.hud[idx] = reset_hud_row(
             self.endless, bool(opts["show_last_action"]), bool(opts["show_last_positive_reward"])
         )
         for k in slots:
             self._build_lit(k)
+        # under the darkness: the blue lit picture with the hidden agent (facing up) on top
+        key = self._under_keys(idx, 0)
+        self.under_key[idx] = key
+        self.under[idx] = self.lit[0, idx]
+        hidden = key >> 15 > 0
+        if hidden.any():
+            paste = idx[hidden]
+            self._paste_agents(self.under_buffer, paste, (key[hidden] >> 15) - 1, self.x[paste], self.y[paste])
         # the reset frames: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
-        self._update_under(idx, np.zeros(len(slots), bool))
         out = np.empty((len(slots) + 1, SCREEN, ROW_BYTES), np.uint8)  # the frames and a scratch frame
         alpha = int(record["alphas"][0])
         out[:-1] = darken(self.under[idx], np.array(alpha)) if alpha else self.under[idx]
         self._finish_frames(idx, out)
         self.frames[idx] = out[:-1]
 
-    def _draw_level(self, k: int, rng: np.random.Generator, opts: dict[str, Any]) -> list[tuple]:
-        """Slot k's agent, coins and exit, with the reference's draws in its order; returns the first spotlights."""
+    def _draw_level(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> None:
+        """Slot k's agent, first spotlights, coins and exit, with the reference's draws in its order."""
         mask = np.zeros((SCREEN, SCREEN), bool)
-        self.heading[k] = int(rng.integers(0, 8))  # heading index (x 45 degrees): what rng.choice draws
+        self.heading[k] = draws.integers(0, 8)  # heading index (x 45 degrees): what rng.choice draws
         if opts["sample_agent_position"]:
-            x, y = sample_position(mask, rng, AGENT_BLOCK, empty=True)
-            x, y = x + int(rng.integers(2, 4)), y + int(rng.integers(2, 4))  # not clamped (kept quirk)
+            x, y = sample_position(mask, draws, AGENT_BLOCK, empty=True)
+            x, y = x + draws.integers(2, 4), y + draws.integers(2, 4)  # not clamped (kept quirk)
         else:
             x, y = CENTRE, CENTRE
             block_position(mask, x, y, ITEM_BLOCK)
         self.pos[k] = x, y
-        spots = [self._new_spot(k, rng, opts) for _ in range(opts["initial_spawns"])]
+        spots = self.spots[k]
+        for j in range(opts["initial_spawns"]):
+            spots[j] = self._new_spot(k, draws, opts)  # (a record from a tuple: fast, unlike arrays of records)
         if self.endless:
-            self._spawn_endless_coin(k, rng, previous=None)
-            return spots
+            self._spawn_endless_coin(k, draws, previous=None)
+            return
         counts = opts["num_coins"]
-        num_coins = int(counts[rng.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
+        num_coins = int(counts[draws.integers(0, len(counts))]) if counts else 0  # what rng.choice(counts) draws
         self.num_coins[k] = self.coins_left[k] = num_coins
         self.goal_without_exit[k] = not opts["use_exit"] and num_coins > 0
         for j in range(num_coins):
-            cx, cy = sample_position(mask, rng, ITEM_BLOCK)
-            cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
+            cx, cy = sample_position(mask, draws, ITEM_BLOCK)
+            cx, cy = cx + draws.integers(2, 4), cy + draws.integers(2, 4)
             self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
         if opts["use_exit"]:
-            ex, ey = sample_position(mask, rng, ITEM_BLOCK)
-            ex, ey = ex + int(rng.integers(2, 4)), ey + int(rng.integers(2, 4))
+            ex, ey = sample_position(mask, draws, ITEM_BLOCK)
+            ex, ey = ex + draws.integers(2, 4), ey + draws.integers(2, 4)
             self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
             if num_coins == 0:
                 self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
-        return spots
 
     def alpha(self, slots: np.ndarray | int) -> np.ndarray:
         """The darkness alpha of the slots' current frames."""
@@ -783,13 +875,13 @@ class SearingSpotlightsCore(BatchedCore):
         self.coin_alive[k, j] = True
         mark_touch(self.item_map[k], x, y, int(self.coin_reach[k]), 1 << j)
 
-    def _spawn_endless_coin(self, k: int, rng: np.random.Generator, previous: tuple[int, int] | None) -> None:
+    def _spawn_endless_coin(self, k: int, draws: StreamDraws, previous: tuple[int, int] | None) -> None:
         """A new coin: the sampler is cleared, the old coin's place blocked, then a draw (the reference's order)."""
         mask = np.zeros((SCREEN, SCREEN), bool)
         if previous is not None:
             block_position(mask, previous[0], previous[1], AGENT_BLOCK)
-        cx, cy = sample_position(mask, rng, AGENT_BLOCK, empty=previous is None)
-        cx, cy = cx + int(rng.integers(2, 4)), cy + int(rng.integers(2, 4))
+        cx, cy = sample_position(mask, draws, AGENT_BLOCK, empty=previous is None)
+        cx, cy = cx + draws.integers(2, 4), cy + draws.integers(2, 4)
         self.item_map[k] = 0
         self._place_coin(k, 0, _clamp_item(cx), _clamp_item(cy))
 
@@ -837,14 +929,13 @@ class SearingSpotlightsCore(BatchedCore):
         return rewards, terminated
 
     def _spawn_spots(self, slots: np.ndarray) -> None:
-        for k in slots:
-            k = int(k)
+        for k in slots.tolist():
             self._append_spot(k)
-            self.next_spawn[k] += self.spawn_interval[k]
-            if not self.endless:
-                self.spawns_left[k] -= 1
-                if self.spawns_left[k] == 0:
-                    self.next_spawn[k] = NEVER
+        self.next_spawn[slots] += self.spawn_interval[slots]
+        if not self.endless:
+            left = self.spawns_left[slots] - 1
+            self.spawns_left[slots] = left
+            self.next_spawn[slots[left == 0]] = NEVER
 
     def _item_events(
         self,
@@ -873,7 +964,9 @@ class SearingSpotlightsCore(BatchedCore):
                 self.end_t_now[k] = min(int(self.end_t[k]), NEVER if per_coin == NEVER else zero_t + per_coin)
                 terminated[i] = self.t[k] == self.end_t_now[k]
                 previous = (int(self.coin_x[k, 0]), int(self.coin_y[k, 0]))
-                self._spawn_endless_coin(k, self.rngs[k], previous)
+                draws = StreamDraws(self.rngs[k])
+                self._spawn_endless_coin(k, draws, previous)
+                draws.close()
                 self._build_lit(k)
                 continue
             coin_reward = 0.0
@@ -915,7 +1008,8 @@ class SearingSpotlightsCore(BatchedCore):
         Returns the per-slot hit flags and what the drawing needs: the centres, table offsets and the drawn
         spotlights.
         """
-        spots = self.spots[idx]
+        width = int(self.spot_count[idx].max())  # list positions past every slot's count are unused
+        spots = self.spots[idx, :width] if isinstance(idx, slice) else as_bytes(self.spots)[idx, :width].view(SPOTS)
         tau = spots["tau"]
         rest = 1.0 - tau
         centre = spots["start"] * rest  # pygame's lerp a * (1 - t) + b * t, twice: a curve from S to O
@@ -953,10 +1047,10 @@ class SearingSpotlightsCore(BatchedCore):
                 spots["drawn"] = drawn
         else:
             tau = np.minimum(tau + speed, 1.0)
-            self.spots["tau"][idx] = tau
-            self.spots["done"][idx] = tau >= 1.0
-            self.spots["centre"][idx] = centre
-            self.spots["drawn"][idx] = drawn
+            self.spots["tau"][idx, :width] = tau
+            self.spots["done"][idx, :width] = tau >= 1.0
+            self.spots["centre"][idx, :width] = centre
+            self.spots["drawn"][idx, :width] = drawn
         if store_drawn:  # (else every listed spotlight was drawn in this and the last step)
             self.drawn_is_listed = removed is None and isinstance(idx, slice)
         if removed is not None and removed.any():
@@ -968,13 +1062,14 @@ class SearingSpotlightsCore(BatchedCore):
         """Compact the spotlight lists (keeping their order); freed positions get the unused values."""
         local = np.flatnonzero(removed.any(axis=1))
         slots = self.all_slots[idx][local]
-        spots = self.spots[slots]
-        keep = spots["listed"] & ~removed[local]
+        width = removed.shape[1]  # (positions past it are unused)
+        spots = as_bytes(self.spots)[slots, :width]
+        keep = self.spots["listed"][slots, :width] & ~removed[local]
         order = np.argsort(~keep, axis=1, kind="stable")
         compacted = np.take_along_axis(spots, order, axis=1)
         count = keep.sum(axis=1)
-        compacted[np.arange(compacted.shape[1])[None, :] >= count[:, None]] = self.unused_spot
-        self.spots[slots] = compacted
+        compacted[np.arange(compacted.shape[1])[None, :] >= count[:, None]] = as_bytes(self.unused_spot)
+        as_bytes(self.spots)[slots, :width] = compacted
         self.spot_count[slots] = count
 
     # ---------------------------------------------------------------------------------------------- draw
@@ -1062,12 +1157,9 @@ class SearingSpotlightsCore(BatchedCore):
             unions[target[won]] |= unions[pending[won]]
             pending = pending[~won]
 
-    def _update_under(self, idx: Index, red: np.ndarray) -> None:
-        """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
-        feedback) with the hidden agent on top. A slot is rebuilt when its lit picture changed or the floor
-        colour flips; an agent that moved or turned is erased (its rows copied back from the lit picture) and
-        pasted again."""
-        # what is drawn in a slot, as one number: agent sprite id + 1 (0: none), its centre y and x, red floor
+    def _under_keys(self, idx: Index, red: np.ndarray | int) -> np.ndarray:
+        """What the picture under the darkness shows, as one number per slot: agent sprite id + 1 (0: none), its
+        centre y and x, red floor."""
         key = self.heading[idx] * (self.t[idx] > 0)  # the reset frame shows the agent facing up
         key += self.agent_sprite0[idx] + 1
         key *= self.agent_hidden[idx]
@@ -1077,6 +1169,14 @@ class SearingSpotlightsCore(BatchedCore):
         key += self.x[idx]
         key <<= 1
         key += red
+        return key
+
+    def _update_under(self, idx: Index, red: np.ndarray) -> None:
+        """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
+        feedback) with the hidden agent on top. A slot is rebuilt when its lit picture changed or the floor
+        colour flips; an agent that moved or turned is erased (its rows copied back from the lit picture) and
+        pasted again."""
+        key = self._under_keys(idx, red)
         old = self.under_key[idx]
         changed = np.flatnonzero(key != old)
         if not changed.size:
@@ -1206,9 +1306,8 @@ class SearingSpotlightsCore(BatchedCore):
             blended = np.bitwise_xor(dark, lit)  # the lit picture in the holes, the darkened one elsewhere
             blended &= holes
             blended ^= dark
-            for i, k in enumerate(slots):
-                if self.rings[k]:
-                    self._draw_rings(int(k), blended[i], lit[i])
+            for i in np.flatnonzero(self.rings[slots]).tolist():
+                self._draw_rings(int(slots[i]), blended[i], lit[i])
             lit = blended
         out[local] = lit
 
