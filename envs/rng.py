@@ -78,8 +78,8 @@ class BoundedDraws:
             count -= 1
         if count >= 2:
             self._state = None
-            for raw in self.bit_generator.random_raw(count // 2).tolist():
-                self.words += (raw & (_WORD - 1), raw >> 32)  # low half first, as numpy's next_uint32 does
+            raw = self.bit_generator.random_raw(count // 2)
+            self.words += raw.astype("<u8", copy=False).view("<u4").tolist()  # low half first, like next_uint32
         if count % 2:
             self.words.append(self._word())
 
