@@ -41,6 +41,7 @@ from envs.rng import seeded_generator
 __all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_core", "seeded_generator"]
 
 Index = slice | np.ndarray
+_SEED_TYPES = (int, np.integer)
 RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
 DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
 
@@ -88,12 +89,15 @@ class BatchedCore:
         levels together (its ``_reset_slots`` hook), which saves the per-slot overhead when many episodes end at once.
         """
         opts = self.resolve(options)  # validate before touching any state
-        slots = [int(k) for k in slots]
+        if isinstance(slots, np.ndarray):
+            slots = slots.astype(np.int64, copy=False).tolist()
+        else:
+            slots = [int(k) for k in slots]
         seeds = [None] * len(slots) if seeds is None else list(seeds)
         if len(seeds) != len(slots):
             raise ValueError(f"got {len(seeds)} seeds for {len(slots)} slots")
         for seed in seeds:
-            if seed is not None and (not isinstance(seed, int | np.integer) or seed < 0):
+            if seed is not None and (not isinstance(seed, _SEED_TYPES) or seed < 0):
                 raise ValueError(f"seed={seed!r} is invalid: expected a non-negative int or None")
         rngs = []
         for k, seed in zip(slots, seeds, strict=True):

@@ -198,44 +198,45 @@ def target_ring() -> tuple[Sprite, int]:
 
 
 @cache
-def command_walk(size: int, allowed: int) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
-    """For every tile ``x * size + y``: the allowed commands, in list order, that keep the walk inside the arena,
-    and the tile each of them leads to."""
+def command_walk(size: int, allowed: int, torus: bool = False) -> tuple[tuple[tuple[int, int], ...], ...]:
+    """For every tile ``x * size + y``: (command, tile it leads to) for each of the first ``allowed`` commands, in
+    list order, that keeps the walk inside the arena (all of them on the endless variant's torus, which wraps)."""
     steps = []
     for x in range(size):
         for y in range(size):
-            valid = [
-                c for c, (dx, dy) in enumerate(COMMAND_DELTAS[:allowed]) if 0 <= x + dx < size and 0 <= y + dy < size
-            ]
-            steps.append(
-                (tuple(valid), tuple((x + COMMAND_DELTAS[c][0]) * size + y + COMMAND_DELTAS[c][1] for c in valid))
-            )
+            moves = []
+            for c, (dx, dy) in enumerate(COMMAND_DELTAS[:allowed]):
+                nx, ny = x + dx, y + dy
+                if torus:
+                    nx, ny = nx % size, ny % size
+                if 0 <= nx < size and 0 <= ny < size:
+                    moves.append((c, nx * size + ny))
+            steps.append(tuple(moves))
     return tuple(steps)
 
 
 def walk_commands(draws: BoundedDraws, walk: tuple, tile: int, count: int) -> list[int]:
-    """``count`` commands of a walk from ``tile`` that stays inside the arena (``walk = command_walk(...)``), each
-    drawn as ``rng.choice`` of the commands valid there.
+    """``count`` commands of a walk from ``tile`` (``walk = command_walk(...)``), each drawn as ``rng.choice`` of the
+    commands valid there.
 
     The hot loop of a reset, so Lemire's method runs inline on the drawn words: a product whose low 32 bits are at
-    least n is never rejected (almost always, for n <= 9); any other word goes to ``draws.below``, which decides
-    exactly (and draws another word when numpy would).
+    least n is never rejected (almost always, for n <= 9); the first other word ends the fast loop, and the rest of
+    the walk goes through ``draws.below``, which decides exactly (and draws another word when numpy would).
     """
     words, used, walked = draws.words, draws.used, []
-    for _ in range(count):
-        valid, leads_to = walk[tile]
-        n = len(valid)
-        product = words[used] * n if used < len(words) else 0
-        if product & 0xFFFFFFFF >= n:
-            pick = product >> 32
-            used += 1
-        else:
-            draws.used = used
-            pick = draws.below(n)
-            used = draws.used
-        walked.append(valid[pick])
-        tile = leads_to[pick]
-    draws.used = used
+    for word in words[used : used + count]:  # the words reserved for the walk
+        moves = walk[tile]
+        n = len(moves)
+        product = word * n
+        if product & 0xFFFFFFFF < n:
+            break
+        command, tile = moves[product >> 32]
+        walked.append(command)
+    draws.used = used + len(walked)
+    for _ in range(count - len(walked)):
+        moves = walk[tile]
+        command, tile = moves[draws.below(len(moves))]
+        walked.append(command)
     return walked
 
 
@@ -450,9 +451,8 @@ class MortarMayhemCore(BatchedCore):
             setattr(self, name, self.slot_state[:, start] if width == 1 else self.slot_state[:, start : start + width])
         self.shown[:] = -1  # nothing drawn yet
         self.commands = np.zeros((n, 16), np.int64)
-        self.reward_failure = np.zeros(n)
-        self.reward_success = np.zeros(n)
-        self.reward_episode = np.zeros(n)
+        self.slot_rewards = np.zeros((n, 3))  # one row per slot, so that a reset writes it in one assignment
+        self.reward_failure, self.reward_success, self.reward_episode = self.slot_rewards.T
         self.visual_feedback = np.ones(n, bool)
         self.tiles_on = np.zeros(n, bool)
         # clue stream: the icon (command, or -1 for a blank frame) of every frame; `clue_pos` is the frame on screen
@@ -516,7 +516,7 @@ class MortarMayhemCore(BatchedCore):
             count = int(count_list[0])
             words += count + choices
         picks = [int(values[0]) for values in lists]  # drawn per slot only when a list offers a choice
-        walk = None if self.endless else command_walk(size, allowed)
+        walk = command_walk(size, allowed, torus=self.endless)  # endless: any allowed command, the targets wrap
         sheet = self._sheet_for(AGENT_SCALE if self.grid else opts["agent_scale"])
         grid_base = self._grid_moves[4][size]
         if not self.grid:
@@ -525,21 +525,19 @@ class MortarMayhemCore(BatchedCore):
         background = int(self.background_index[size, 0, 0, 0])
         scale = self._sheet_scales[sheet]
         rows, commands, streams, spawns = [], [], [], []
+        seen, cells, jitter = self._rng_seen, size * size, self.spawn_jitter
         for k, rng in zip(slots, rngs, strict=True):
-            draws = BoundedDraws(rng, words, fresh=rng is not self._rng_seen[k])  # a new generator has drawn nothing
-            self._rng_seen[k] = rng
-            tile = draws.below(size * size)
+            draws = BoundedDraws(rng, words, fresh=rng is not seen[k])  # a new generator has drawn nothing
+            seen[k] = rng
+            tile = draws.below(cells)
             start_x, start_y = divmod(tile, size)  # the spawn tile (the jitter keeps the centre inside it)
             x, y = left + TILE * start_x + TILE // 2, left + TILE * start_y + TILE // 2
-            if self.spawn_jitter:
+            if jitter:
                 x, y = x + draws.below(4) - 2, y + draws.below(4) - 2
             if len(count_list) > 1:
                 count = int(count_list[draws.below(len(count_list))])
                 draws.reserve(count + choices)
-            if walk is None:  # endless: uniform over the allowed commands, no validity filter (the targets wrap)
-                walked = [draws.below(allowed) for _ in range(count)]
-            else:
-                walked = walk_commands(draws, walk, tile, count)
+            walked = walk_commands(draws, walk, tile, count)
             if choices:
                 picks = [int(values[draws.below(len(values))]) for values in lists]
             draws.close()
@@ -568,8 +566,9 @@ class MortarMayhemCore(BatchedCore):
                 streams.append([c for command in walked for c in [command] * duration + [-1] * delay])
 
         ks = np.array(slots, dtype=np.int64)
-        fresh_drawing = ks[~self.stale[ks]]  # the sprite drawn last is this slot's agent: keep it (see the module doc)
-        self.drawn[fresh_drawing] = self.slot_state[fresh_drawing, AGENT_COLUMNS]
+        stale = self.stale[ks]  # else the sprite drawn last is this slot's agent: keep it (see the module doc)
+        drawing = ks[~stale] if stale.any() else ks
+        self.drawn[drawing] = self.slot_state[drawing, AGENT_COLUMNS]
         self.stale[ks] = True
         self.slot_state[ks] = rows
         width = max(len(walked) for walked in commands)
@@ -579,9 +578,11 @@ class MortarMayhemCore(BatchedCore):
             commands = [walked + [0] * (width - len(walked)) for walked in commands]
         commands = np.array(commands, dtype=np.int64)
         self.commands[ks, :width] = commands
-        self.reward_failure[ks] = opts["reward_command_failure"]
-        self.reward_success[ks] = opts["reward_command_success"]
-        self.reward_episode[ks] = opts.get("reward_episode_success", 0.0)
+        self.slot_rewards[ks] = (
+            opts["reward_command_failure"],
+            opts["reward_command_success"],
+            opts.get("reward_episode_success", 0.0),
+        )
         self.visual_feedback[ks] = opts["visual_feedback"]
         self.tiles_on[ks] = False
         if self.clue_phase:
