@@ -18,7 +18,8 @@ What a family implements (``idx`` is ``slice(None)`` for all slots or an int arr
   ``_reset_slot``; :meth:`BatchedCore.reset_slots` is the entry point either way;
 * ``_step(idx, actions) -> (rewards, terminated)``: advance the slots ``idx`` and draw their frames;
 * ``_observation(idx)``: the observation arrays of the slots (views are fine, the faces copy);
-* ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here);
+* ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here), or
+  ``_final_infos(slots)`` for several finished slots at once (by default a loop over ``_final_info``);
 * optionally ``_step_info(k)`` (endless envs: ``ground_truth``), ``_debug_frame(k)`` and ``render_fps(k)``.
 """
 
@@ -40,6 +41,7 @@ from envs.rng import seeded_generator
 __all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_core", "seeded_generator"]
 
 Index = slice | np.ndarray
+_SEED_TYPES = (int, np.integer)
 RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
 DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
 
@@ -87,12 +89,15 @@ class BatchedCore:
         levels together (its ``_reset_slots`` hook), which saves the per-slot overhead when many episodes end at once.
         """
         opts = self.resolve(options)  # validate before touching any state
-        slots = [int(k) for k in slots]
+        if isinstance(slots, np.ndarray):
+            slots = slots.astype(np.int64, copy=False).tolist()
+        else:
+            slots = [int(k) for k in slots]
         seeds = [None] * len(slots) if seeds is None else list(seeds)
         if len(seeds) != len(slots):
             raise ValueError(f"got {len(seeds)} seeds for {len(slots)} slots")
         for seed in seeds:
-            if seed is not None and (not isinstance(seed, int | np.integer) or seed < 0):
+            if seed is not None and (not isinstance(seed, _SEED_TYPES) or seed < 0):
                 raise ValueError(f"seed={seed!r} is invalid: expected a non-negative int or None")
         rngs = []
         for k, seed in zip(slots, seeds, strict=True):
@@ -122,11 +127,11 @@ class BatchedCore:
         self.episode_length[sel] += 1
         finals: dict[int, dict] = {}
         if terminated.any():
-            slots = self.slots(sel)
-            for k in slots[terminated]:
-                k = int(k)
-                finals[k] = {"reward": float(self.episode_return[k]), "length": int(self.episode_length[k])}
-                finals[k].update(self._final_info(k))
+            done = self.slots(sel)[terminated]
+            returns, lengths = self.episode_return[done].tolist(), self.episode_length[done].tolist()
+            done = done.tolist()
+            for k, reward, length, info in zip(done, returns, lengths, self._final_infos(done), strict=True):
+                finals[k] = {"reward": reward, "length": length, **info}
         return rewards, terminated, finals
 
     def observations(self, idx: np.ndarray | None = None) -> np.ndarray | dict[str, np.ndarray]:
@@ -176,6 +181,10 @@ class BatchedCore:
 
     def _final_info(self, k: int) -> dict[str, Any]:
         return {}
+
+    def _final_infos(self, slots: list[int]) -> list[dict[str, Any]]:
+        # Families may override this to gather the statistics of many finished slots at once.
+        return [self._final_info(k) for k in slots]
 
     def _step_info(self, k: int) -> dict[str, Any]:
         return {}

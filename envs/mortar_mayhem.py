@@ -43,6 +43,7 @@ COMMANDS = ("right", "down", "left", "up", "stay", "right_down", "right_up", "le
 COMMAND_DELTAS = ((1, 0), (0, 1), (-1, 0), (0, -1), (0, 0), (1, 1), (1, -1), (-1, 1), (-1, -1))
 COMMAND_STEP = np.array(COMMAND_DELTAS, dtype=np.int64)
 ONE_HOT_INDEX = (1, 4, 2, 3, 0, 5, 6, 7, 8)
+ONE_HOT = np.eye(9, dtype=np.float32)[list(ONE_HOT_INDEX)]  # the 9-entry block of each command in the vector
 ICON_ANGLE = (0, 270, 180, 90, None, 315, 45, 225, 135)  # rotation of the right arrow; None = the "stay" sign
 MAX_VECTOR_COMMANDS = 20
 
@@ -94,6 +95,51 @@ def backgrounds() -> tuple[np.ndarray, np.ndarray]:
     stack.setflags(write=False)
     index.setflags(write=False)
     return stack, index
+
+
+class SpawnFrames:
+    """Frames of a freshly spawned agent (facing up) on the all-blue arena, drawn once each and then copied.
+
+    A reset frame depends only on the arena, the spawn pixel and the sprite scale (a few hundred frames for the
+    default options), so a batch of resets gathers its frames in one copy instead of pasting sprites. Past
+    ``LIMIT`` frames the store starts over, which keeps its memory bounded for any mix of options.
+    """
+
+    LIMIT = 1024  # frames kept (about 22 MB)
+
+    def __init__(self) -> None:
+        self.index: dict[tuple[int, int, int, float], int] = {}
+        self.stack = np.zeros((0, SCREEN, SCREEN, 3), dtype=np.uint8)
+
+    def ids(self, keys: list[tuple[int, int, int, float]]) -> list[int]:
+        """Rows of ``stack`` holding the frames of ``keys`` = (background id, x, y, agent scale), drawn if new."""
+        index = self.index
+        if len(index) + len(keys) > self.LIMIT:
+            index.clear()
+        found = [index.get(key) for key in keys]
+        if None in found:
+            found = [self._draw(key) if row is None else row for key, row in zip(keys, found, strict=True)]
+        return found
+
+    def _draw(self, key: tuple[int, int, int, float]) -> int:
+        row = self.index.get(key)  # a key met twice in one batch is drawn once
+        if row is not None:
+            return row
+        row = self.index[key] = len(self.index)
+        if row >= len(self.stack):
+            grown = np.zeros((max(2 * len(self.stack), 64), SCREEN, SCREEN, 3), dtype=np.uint8)
+            grown[: len(self.stack)] = self.stack
+            self.stack = grown
+        background, x, y, scale = key
+        frame = self.stack[row]
+        frame[:] = backgrounds()[0][background]
+        agent_sheet(scale).paste_one(frame.reshape(SCREEN, SCREEN * 3), y, x, 0)
+        return row
+
+
+@cache
+def spawn_frames() -> SpawnFrames:
+    return SpawnFrames()
 
 
 def arena_left(size: int) -> int:
@@ -152,44 +198,45 @@ def target_ring() -> tuple[Sprite, int]:
 
 
 @cache
-def command_walk(size: int, allowed: int) -> tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]:
-    """For every tile ``x * size + y``: the allowed commands, in list order, that keep the walk inside the arena,
-    and the tile each of them leads to."""
+def command_walk(size: int, allowed: int, torus: bool = False) -> tuple[tuple[tuple[int, int], ...], ...]:
+    """For every tile ``x * size + y``: (command, tile it leads to) for each of the first ``allowed`` commands, in
+    list order, that keeps the walk inside the arena (all of them on the endless variant's torus, which wraps)."""
     steps = []
     for x in range(size):
         for y in range(size):
-            valid = [
-                c for c, (dx, dy) in enumerate(COMMAND_DELTAS[:allowed]) if 0 <= x + dx < size and 0 <= y + dy < size
-            ]
-            steps.append(
-                (tuple(valid), tuple((x + COMMAND_DELTAS[c][0]) * size + y + COMMAND_DELTAS[c][1] for c in valid))
-            )
+            moves = []
+            for c, (dx, dy) in enumerate(COMMAND_DELTAS[:allowed]):
+                nx, ny = x + dx, y + dy
+                if torus:
+                    nx, ny = nx % size, ny % size
+                if 0 <= nx < size and 0 <= ny < size:
+                    moves.append((c, nx * size + ny))
+            steps.append(tuple(moves))
     return tuple(steps)
 
 
 def walk_commands(draws: BoundedDraws, walk: tuple, tile: int, count: int) -> list[int]:
-    """``count`` commands of a walk from ``tile`` that stays inside the arena (``walk = command_walk(...)``), each
-    drawn as ``rng.choice`` of the commands valid there.
+    """``count`` commands of a walk from ``tile`` (``walk = command_walk(...)``), each drawn as ``rng.choice`` of the
+    commands valid there.
 
     The hot loop of a reset, so Lemire's method runs inline on the drawn words: a product whose low 32 bits are at
-    least n is never rejected (almost always, for n <= 9); any other word goes to ``draws.below``, which decides
-    exactly (and draws another word when numpy would).
+    least n is never rejected (almost always, for n <= 9); the first other word ends the fast loop, and the rest of
+    the walk goes through ``draws.below``, which decides exactly (and draws another word when numpy would).
     """
     words, used, walked = draws.words, draws.used, []
-    for _ in range(count):
-        valid, leads_to = walk[tile]
-        n = len(valid)
-        product = words[used] * n if used < len(words) else 0
-        if product & 0xFFFFFFFF >= n:
-            pick = product >> 32
-            used += 1
-        else:
-            draws.used = used
-            pick = draws.below(n)
-            used = draws.used
-        walked.append(valid[pick])
-        tile = leads_to[pick]
-    draws.used = used
+    for word in words[used : used + count]:  # the words reserved for the walk
+        moves = walk[tile]
+        n = len(moves)
+        product = word * n
+        if product & 0xFFFFFFFF < n:
+            break
+        command, tile = moves[product >> 32]
+        walked.append(command)
+    draws.used = used + len(walked)
+    for _ in range(count - len(walked)):
+        moves = walk[tile]
+        command, tile = moves[draws.below(len(moves))]
+        walked.append(command)
     return walked
 
 
@@ -404,9 +451,8 @@ class MortarMayhemCore(BatchedCore):
             setattr(self, name, self.slot_state[:, start] if width == 1 else self.slot_state[:, start : start + width])
         self.shown[:] = -1  # nothing drawn yet
         self.commands = np.zeros((n, 16), np.int64)
-        self.reward_failure = np.zeros(n)
-        self.reward_success = np.zeros(n)
-        self.reward_episode = np.zeros(n)
+        self.slot_rewards = np.zeros((n, 3))  # one row per slot, so that a reset writes it in one assignment
+        self.reward_failure, self.reward_success, self.reward_episode = self.slot_rewards.T
         self.visual_feedback = np.ones(n, bool)
         self.tiles_on = np.zeros(n, bool)
         # clue stream: the icon (command, or -1 for a blank frame) of every frame; `clue_pos` is the frame on screen
@@ -467,31 +513,33 @@ class MortarMayhemCore(BatchedCore):
         # words can be drawn at once when the command count is fixed; else the count is drawn first.
         words = 1 + 2 * self.spawn_jitter + (len(count_list) > 1)
         if len(count_list) == 1:
-            words += count_list[0] + choices
-        walk = None if self.endless else command_walk(size, allowed)
+            count = int(count_list[0])
+            words += count + choices
+        picks = [int(values[0]) for values in lists]  # drawn per slot only when a list offers a choice
+        walk = command_walk(size, allowed, torus=self.endless)  # endless: any allowed command, the targets wrap
         sheet = self._sheet_for(AGENT_SCALE if self.grid else opts["agent_scale"])
         grid_base = self._grid_moves[4][size]
         if not self.grid:
             radius = int(25 * self._sheet_scales[sheet])
             config = (opts["agent_speed"], radius, 0 if self.endless else left, left + TILE * size, self.endless)
         background = int(self.background_index[size, 0, 0, 0])
-        rows, commands, vector_ones, streams = [], [], [], []
+        scale = self._sheet_scales[sheet]
+        rows, commands, streams, spawns = [], [], [], []
+        seen, cells, jitter = self._rng_seen, size * size, self.spawn_jitter
         for k, rng in zip(slots, rngs, strict=True):
-            draws = BoundedDraws(rng, words, fresh=rng is not self._rng_seen[k])  # a new generator has drawn nothing
-            self._rng_seen[k] = rng
-            tile = draws.below(size * size)
+            draws = BoundedDraws(rng, words, fresh=rng is not seen[k])  # a new generator has drawn nothing
+            seen[k] = rng
+            tile = draws.below(cells)
             start_x, start_y = divmod(tile, size)  # the spawn tile (the jitter keeps the centre inside it)
             x, y = left + TILE * start_x + TILE // 2, left + TILE * start_y + TILE // 2
-            if self.spawn_jitter:
+            if jitter:
                 x, y = x + draws.below(4) - 2, y + draws.below(4) - 2
-            count = int(count_list[draws.below(len(count_list))]) if not self.endless else count_list[0]
             if len(count_list) > 1:
+                count = int(count_list[draws.below(len(count_list))])
                 draws.reserve(count + choices)
-            if walk is None:  # endless: uniform over the allowed commands, no validity filter (the targets wrap)
-                walked = [draws.below(allowed) for _ in range(count)]
-            else:
-                walked = walk_commands(draws, walk, tile, count)
-            picks = [int(values[draws.below(len(values))]) for values in lists]
+            walked = walk_commands(draws, walk, tile, count)
+            if choices:
+                picks = [int(values[draws.below(len(values))]) for values in lists]
             draws.close()
             duration, delay = picks[:2] if self.clue_phase else (0, 0)
             lethal_steps, act_steps = picks[-2:]
@@ -513,41 +561,48 @@ class MortarMayhemCore(BatchedCore):
                 + [background, background, x, y, 0, sheet, icon, x, y, 0, sheet]
             )
             commands.append(walked)
-            if self.vector_observation:
-                base = k * self.vector.shape[1]
-                vector_ones += [base + 9 * c + ONE_HOT_INDEX[command] for c, command in enumerate(walked)]
+            spawns.append((background, x, y, scale))
             if self.clue_phase:
                 streams.append([c for command in walked for c in [command] * duration + [-1] * delay])
 
         ks = np.array(slots, dtype=np.int64)
-        fresh_drawing = ks[~self.stale[ks]]  # the sprite drawn last is this slot's agent: keep it (see the module doc)
-        self.drawn[fresh_drawing] = self.slot_state[fresh_drawing, AGENT_COLUMNS]
+        stale = self.stale[ks]  # else the sprite drawn last is this slot's agent: keep it (see the module doc)
+        drawing = ks[~stale] if stale.any() else ks
+        self.drawn[drawing] = self.slot_state[drawing, AGENT_COLUMNS]
         self.stale[ks] = True
         self.slot_state[ks] = rows
         width = max(len(walked) for walked in commands)
         self._ensure_commands(width)
-        if any(len(walked) < width for walked in commands):  # padded; commands past a slot's count are never read
+        padded = any(len(walked) < width for walked in commands)
+        if padded:  # commands past a slot's count are never read
             commands = [walked + [0] * (width - len(walked)) for walked in commands]
+        commands = np.array(commands, dtype=np.int64)
         self.commands[ks, :width] = commands
-        self.reward_failure[ks] = opts["reward_command_failure"]
-        self.reward_success[ks] = opts["reward_command_success"]
-        self.reward_episode[ks] = opts.get("reward_episode_success", 0.0)
+        self.slot_rewards[ks] = (
+            opts["reward_command_failure"],
+            opts["reward_command_success"],
+            opts.get("reward_episode_success", 0.0),
+        )
         self.visual_feedback[ks] = opts["visual_feedback"]
         self.tiles_on[ks] = False
         if self.clue_phase:
             self._ensure_stream(max(len(stream) for stream in streams))
             for k, stream in zip(slots, streams, strict=True):
                 self.stream[k, : len(stream)] = stream
-        if self.vector_observation:
-            self.vector[ks] = 0.0
-            self.vector.reshape(-1)[vector_ones] = 1.0
-        self.frames[ks] = self.backgrounds[background]
-        shown = self.shown[ks]
-        self._sheets[sheet].paste(self.frames_rows, ks, shown[:, 2], shown[:, 1], shown[:, 3])  # facing up
-        icon = shown[:, 5] >= 0
-        if icon.any():
-            corner = np.full(int(icon.sum()), ICON_CORNER)
-            icon_sheet().paste(self.frames_rows, ks[icon], corner, corner, shown[icon, 5])
+        if self.vector_observation:  # one one-hot block of 9 per command, zeros past the count
+            one_hot = ONE_HOT[commands]
+            if padded:
+                one_hot[np.arange(width) >= self.num_commands[ks, None]] = 0.0
+            self.vector[ks, : 9 * width] = one_hot.reshape(len(ks), 9 * width)
+            if width < MAX_VECTOR_COMMANDS:
+                self.vector[ks, 9 * width :] = 0.0
+        store = spawn_frames()
+        spawn_ids = store.ids(spawns)  # first: drawing new frames may replace the stack
+        self.frames[ks] = store.stack[spawn_ids]
+        if self.clue_phase:  # the clue stream's first frame shows the first command's icon
+            icons = self.shown[ks, 5]
+            corner = np.full(len(ks), ICON_CORNER)
+            icon_sheet().paste(self.frames_rows, ks, corner, corner, icons)
 
     def _ensure_commands(self, count: int) -> None:
         if count > self.commands.shape[1]:
@@ -761,18 +816,19 @@ class MortarMayhemCore(BatchedCore):
             return {"visual_observation": self.frames[idx], "vector_observation": self.vector[idx]}
         return self.frames[idx]
 
-    def _final_info(self, k: int) -> dict[str, Any]:
+    def _final_infos(self, slots: list[int]) -> list[dict[str, Any]]:
+        counts = self.num_commands[slots].tolist()
         if self.endless:
-            count = int(self.num_commands[k])
-            return {
-                "commands_completed": int(self.completed_total[k]),
-                "max_command_sequence": count - 1 if count > 1 else 0,
-            }
-        success = int(self.success[k])
-        return {
-            "success": success,
-            "commands_completed": (int(self.current[k]) - 1 + success) / int(self.num_commands[k]),
-        }
+            return [
+                {"commands_completed": completed, "max_command_sequence": count - 1 if count > 1 else 0}
+                for completed, count in zip(self.completed_total[slots].tolist(), counts, strict=True)
+            ]
+        return [
+            {"success": success, "commands_completed": (current - 1 + success) / count}
+            for success, current, count in zip(
+                self.success[slots].tolist(), self.current[slots].tolist(), counts, strict=True
+            )
+        ]
 
     def _step_info(self, k: int) -> dict[str, Any]:
         if self.endless:

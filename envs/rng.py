@@ -9,9 +9,42 @@ draws (the next level, the next episode of a continuing generator) stay identica
 
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 
 _WORD = 1 << 32
+
+
+_capsule_pointer = ctypes.pythonapi.PyCapsule_GetPointer
+_capsule_pointer.restype, _capsule_pointer.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
+
+
+def _next_uint32_function() -> ctypes._CFuncPtr | None:
+    """PCG64's C ``next_uint32`` (the function behind every 32-bit draw, with the leftover-half buffer), called on a
+    generator's state through the ``bitgen_t`` struct of its capsule (numpy's public C API). None if that struct
+    does not hold the function numpy's own ctypes interface reports."""
+    try:
+        probe = np.random.PCG64(0)
+        bitgen = _capsule_pointer(probe.capsule, b"BitGenerator")
+        address = ctypes.c_void_p.from_address(bitgen + 2 * ctypes.sizeof(ctypes.c_void_p)).value  # 3rd field
+        if address != ctypes.cast(probe.ctypes.next_uint32, ctypes.c_void_p).value:
+            return None
+        return ctypes.CFUNCTYPE(ctypes.c_uint32, ctypes.c_void_p)(address)
+    except (AttributeError, TypeError, ValueError):
+        return None
+
+
+_NEXT_UINT32 = _next_uint32_function()
+
+
+def next_word(rng: np.random.Generator) -> int:
+    """``int(rng.integers(0, 2**32, dtype=np.uint32))`` (a leftover half first, else the low half of a fresh
+    output, keeping its high half), calling numpy's C function directly: a third of numpy's Python-level cost."""
+    if _NEXT_UINT32 is None:
+        return int(rng.integers(0, _WORD, dtype=np.uint32))
+    bitgen = _capsule_pointer(rng.bit_generator.capsule, b"BitGenerator")
+    return _NEXT_UINT32(ctypes.c_void_p.from_address(bitgen).value)  # the struct's first field: the state
 
 
 def seeded_generator(seed: int) -> np.random.Generator:
@@ -63,7 +96,7 @@ class BoundedDraws:
         """One word through numpy itself, which keeps any leftover half in the bit generator."""
         self.buffered = not self.buffered
         self._state = None
-        return int(self.rng.integers(0, _WORD, dtype=np.uint32))
+        return next_word(self.rng)
 
     def reserve(self, count: int) -> None:
         """Make ``count`` more words available, drawing only words that will certainly be used (see the class)."""
@@ -78,8 +111,8 @@ class BoundedDraws:
             count -= 1
         if count >= 2:
             self._state = None
-            for raw in self.bit_generator.random_raw(count // 2).tolist():
-                self.words += (raw & (_WORD - 1), raw >> 32)  # low half first, as numpy's next_uint32 does
+            raw = self.bit_generator.random_raw(count // 2)
+            self.words += raw.astype("<u8", copy=False).view("<u4").tolist()  # low half first, like next_uint32
         if count % 2:
             self.words.append(self._word())
 

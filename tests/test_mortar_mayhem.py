@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 import envs
-from envs.mortar_mayhem import MortarMayhemCore, command_walk, walk_commands
+from envs.mortar_mayhem import (
+    MortarMayhemCore,
+    agent_sheet,
+    arena_picture,
+    command_walk,
+    spawn_frames,
+    walk_commands,
+)
 from envs.rng import BoundedDraws, seeded_generator
 from tests.batching import check_batched_equals_singles
 
@@ -532,6 +539,21 @@ def test_reset_slots_with_a_repeated_slot_keeps_its_last_level() -> None:
     np.testing.assert_array_equal(together.target, one_by_one.target)
 
 
+def test_spawn_frames_equal_a_fresh_drawing_also_after_the_store_starts_over(monkeypatch) -> None:
+    """Reset frames are copies of stored spawn frames; a store kept small starts over and still draws them right."""
+    store = spawn_frames()
+    monkeypatch.setattr(store, "LIMIT", 8)
+    core = envs.make_core(MMB, num_envs=6)
+    for seed in range(0, 120, 6):
+        scale = 0.3 if seed % 12 else 0.25
+        core.reset_slots(range(6), range(seed, seed + 6), {"agent_scale": scale, "arena_size": 4})
+        assert len(store.index) <= 8 + 6
+        for k in range(6):
+            expected = arena_picture(4)
+            agent_sheet(scale).paste_one(expected.reshape(84, 84 * 3), int(core.y[k]), int(core.x[k]), 0)
+            np.testing.assert_array_equal(core.frames[k], expected)
+
+
 @pytest.mark.parametrize(("size", "allowed"), [(2, 4), (3, 5), (5, 9)])
 def test_walk_commands_inline_draws_equal_bounded_draws(size: int, allowed: int) -> None:
     """The walk's inline Lemire step equals BoundedDraws.below, also for words it hands over: 0 (rejected for
@@ -546,10 +568,8 @@ def test_walk_commands_inline_draws_equal_bounded_draws(size: int, allowed: int)
     walked = walk_commands(fast, walk, 0, count)
     expected, tile = [], 0
     for _ in range(count):
-        valid, leads_to = walk[tile]
-        pick = slow.below(len(valid))
-        expected.append(valid[pick])
-        tile = leads_to[pick]
+        command, tile = walk[tile][slow.below(len(walk[tile]))]
+        expected.append(command)
     assert walked == expected
     assert fast.words == slow.words and fast.used == slow.used
     fast.close()

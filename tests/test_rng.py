@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from envs.rng import BoundedDraws, seeded_generator
+from envs import rng as rng_module
+from envs.rng import BoundedDraws, next_word, seeded_generator
 
 
 def live_state(rng: np.random.Generator) -> dict:
@@ -113,3 +114,17 @@ def test_read_ahead_redraws_like_numpy_in_the_biased_case(rejected: int) -> None
 def test_only_pcg64_streams_are_reproduced() -> None:
     with pytest.raises(TypeError, match="PCG64"):
         BoundedDraws(np.random.Generator(np.random.Philox(0)))
+
+
+@pytest.mark.parametrize("leftover", [False, True])
+def test_next_word_equals_numpy_32_bit_draws(leftover: bool) -> None:
+    assert rng_module._NEXT_UINT32 is not None  # numpy's bitgen_t struct was found: the C path is the one tested
+    for seed in range(50):
+        ours, theirs = seeded_generator(seed), seeded_generator(seed)
+        if leftover:
+            ours.integers(0, 9)
+            theirs.integers(0, 9)
+        got = [next_word(ours) for _ in range(seed % 5 + 1)]
+        assert got == [int(theirs.integers(0, 2**32, dtype=np.uint32)) for _ in got]
+        assert live_state(ours) == live_state(theirs)
+        assert ours.integers(0, 1000, size=9).tolist() == theirs.integers(0, 1000, size=9).tolist()
