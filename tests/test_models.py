@@ -19,7 +19,7 @@ from agents.models import (
     sample_actions,
 )
 from agents.ppo import filled_index
-from agents.sequences import pad_sequences, split_sequences
+from agents.sequences import Sequences, pad_sequences, split_sequences
 
 IMAGE = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
 DICT = gym.spaces.Dict({"visual_observation": IMAGE, "vector_observation": gym.spaces.Box(-1.0, 1.0, (5,), np.float32)})
@@ -151,13 +151,19 @@ def test_sequences_reproduce_step_by_step_outputs(memory: str, max_length: int |
     torch.testing.assert_close(logits[0], flat_logits[batch.step_index], atol=1e-5, rtol=1e-5)
 
 
-@pytest.mark.parametrize("memory", ["none", "gru", "lstm"])
-def test_padding_changes_no_output_and_no_gradient(memory: str) -> None:
+def _training_case(memory: str, seed: int) -> tuple[ActorCritic, Sequences, dict[str, torch.Tensor], torch.Tensor]:
+    """A model, the sequences of the hand-made episode layout, random inputs and start states for every step."""
     model = _model(memory, previous_action=True, previous_reward=True)
     terminated, workers, steps = _episode_layout()
     sequences = split_sequences(terminated, None if memory != "none" else 1)
-    inputs = _inputs(model, workers * steps, seed=3)
-    states = torch.randn(workers * steps, *model.state_shape, generator=torch.Generator().manual_seed(4))
+    inputs = _inputs(model, workers * steps, seed=seed)
+    states = torch.randn(workers * steps, *model.state_shape, generator=torch.Generator().manual_seed(seed + 1))
+    return model, sequences, inputs, states
+
+
+@pytest.mark.parametrize("memory", ["none", "gru", "lstm"])
+def test_padding_changes_no_output_and_no_gradient(memory: str) -> None:
+    model, sequences, inputs, states = _training_case(memory, seed=3)
     ids = np.arange(len(sequences))
 
     def loss_and_grads(pad_to: int | None) -> tuple[torch.Tensor, list[torch.Tensor]]:
@@ -182,11 +188,7 @@ def test_padding_changes_no_output_and_no_gradient(memory: str) -> None:
 @pytest.mark.parametrize("memory", ["none", "gru"])
 def test_filler_rows_change_no_output_and_no_gradient(memory: str) -> None:
     """The PPO update rounds a minibatch's rows up with filler (filled_index): same outputs, loss and gradients."""
-    model = _model(memory, previous_action=True, previous_reward=True)
-    terminated, workers, steps = _episode_layout()
-    sequences = split_sequences(terminated, None if memory != "none" else 1)
-    inputs = _inputs(model, workers * steps, seed=5)
-    states = torch.randn(workers * steps, *model.state_shape, generator=torch.Generator().manual_seed(6))
+    model, sequences, inputs, states = _training_case(memory, seed=5)
     batch = pad_sequences(sequences, np.arange(len(sequences)))
     assert batch.num_steps % 8 != 0, "the layout must need filler for this test to mean anything"
 
