@@ -142,12 +142,16 @@ def _filled_buffer(model: ActorCritic, workers: int = 3, steps: int = 8) -> Roll
     return buffer
 
 
-def test_update_changes_weights_and_reports_statistics() -> None:
+def _small_gru_setup() -> tuple[ActorCritic, torch.optim.Optimizer, RolloutBuffer]:
+    """A seeded small GRU model on 36x36 images, its optimizer and a filled rollout buffer."""
     torch.manual_seed(0)
     space = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
     model = ActorCritic(space, gym.spaces.Discrete(2), ModelConfig(memory="gru", memory_size=8, hidden_size=8))
-    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-3)
-    buffer = _filled_buffer(model)
+    return model, torch.optim.AdamW(model.parameters(), lr=1e-3), _filled_buffer(model)
+
+
+def test_update_changes_weights_and_reports_statistics() -> None:
+    model, optimizer, buffer = _small_gru_setup()
     before = [p.detach().clone() for p in model.parameters()]
     config = PPOConfig(epochs=2, minibatches=2)
     stats = ppo_update(
@@ -166,11 +170,7 @@ def test_update_changes_weights_and_reports_statistics() -> None:
 
 
 def test_non_finite_loss_stops_before_touching_the_weights() -> None:
-    torch.manual_seed(0)
-    space = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
-    model = ActorCritic(space, gym.spaces.Discrete(2), ModelConfig(memory="gru", memory_size=8, hidden_size=8))
-    optimizer = torch.optim.AdamW(model.parameters(), lr=1e-3)
-    buffer = _filled_buffer(model)
+    model, optimizer, buffer = _small_gru_setup()
     buffer.returns[1, 2] = float("nan")
     before = [p.detach().clone() for p in model.parameters()]
     sequences = split_sequences(buffer.terminated.numpy(), None)
