@@ -46,6 +46,7 @@ from envs.core import BatchedCore, Index
 from envs.drawing import KEY_BLUE, Sprite, SpriteScatter, agent_sprites, disc_mask, pygame, surface_to_sprite
 from envs.movement import continuous_heading, continuous_velocity
 from envs.options import Option
+from envs.rng import StreamDraws
 
 SCREEN = 84
 ROW_BYTES = SCREEN * 3
@@ -298,69 +299,6 @@ def hud_tables() -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------------------------------------ sampler
-class StreamDraws:
-    """``rng.integers(low, high)`` and ``rng.uniform(low, high)`` values, in any order, from 64-bit outputs read
-    ahead in bulk; :meth:`close` leaves the generator exactly where the one-by-one calls would have.
-
-    Why it is exact: numpy draws a bounded int (range up to 2**32) with Lemire's method on 32-bit words, and PCG64
-    hands out the low, then the high half of each 64-bit output, keeping an unused high half in its state
-    (``has_uint32``/``uinteger``). A double is the top 53 bits of the next whole output and leaves a kept half alone.
-    A level makes ~25 such draws: one read-ahead and one rewind replace ~25 numpy calls of a few microseconds.
-    """
-
-    BLOCK = 32  # outputs per read-ahead (a default level uses ~20)
-
-    __slots__ = ("bit_generator", "saved", "outputs", "used", "half", "has_half")
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        if not isinstance(rng.bit_generator, np.random.PCG64):
-            raise TypeError(f"StreamDraws reproduces PCG64 streams; got {type(rng.bit_generator).__name__}")
-        self.bit_generator = rng.bit_generator
-        self.saved = self.bit_generator.state
-        # numpy's kept high half (``uinteger``, stale once used) and whether it is still to be used (``has_uint32``)
-        self.half, self.has_half = self.saved["uinteger"], bool(self.saved["has_uint32"])
-        self.outputs: list[int] = self.bit_generator.random_raw(self.BLOCK).tolist()
-        self.used = 0  # outputs taken
-
-    def _output(self) -> int:
-        if self.used == len(self.outputs):
-            self.outputs += self.bit_generator.random_raw(self.BLOCK).tolist()
-        self.used += 1
-        return self.outputs[self.used - 1]
-
-    def integers(self, low: float, high: float) -> int:
-        """The value of ``rng.integers(low, high)`` (float bounds are truncated, as numpy does)."""
-        low, span = int(low), int(high) - int(low)
-        if not 1 <= span <= 1 << 32:
-            raise ValueError(f"integers({low}, {high}): expected 1 <= high - low <= 2**32")
-        if span == 1:
-            return low  # numpy draws nothing when there is only one choice
-        while True:
-            if self.has_half:
-                word, self.has_half = self.half, False
-            else:
-                word = self._output()
-                self.half, self.has_half, word = word >> 32, True, word & 0xFFFFFFFF
-            product = word * span
-            low_bits = product & 0xFFFFFFFF
-            # Lemire: a low part below (2**32 - span) % span would bias the result, so numpy draws again
-            if low_bits >= span or low_bits >= ((1 << 32) - span) % span:
-                return low + (product >> 32)
-
-    def uniform(self, low: float, high: float) -> float:
-        """The value of ``rng.uniform(low, high)``: ``low + (high - low) * next_double``."""
-        low, high = float(low), float(high)
-        return low + (high - low) * ((self._output() >> 11) * (1.0 / 9007199254740992.0))
-
-    def close(self) -> None:
-        """Rewind the generator to just after the outputs taken, keeping an unused half as numpy would."""
-        state = dict(self.saved)
-        state["has_uint32"], state["uinteger"] = int(self.has_half), self.half
-        self.bit_generator.state = state
-        if self.used:
-            self.bit_generator.random_raw(self.used)
-
-
 @cache
 def orbit_points(radius: int) -> np.ndarray:
     """Points at the angles 0..719 degrees on a spotlight's orbit (pygame's rotation, for the reference's floats).

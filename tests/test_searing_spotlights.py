@@ -8,6 +8,7 @@ import pytest
 
 import envs
 from envs.core import seeded_generator
+from envs.rng import StreamDraws
 from envs.searing_spotlights import (
     ACTION_COLOURS,
     GREEN,
@@ -17,7 +18,6 @@ from envs.searing_spotlights import (
     SPOTS,
     YELLOW,
     SearingSpotlightsCore,
-    StreamDraws,
     alpha_schedule,
     block_position,
     darken,
