@@ -36,7 +36,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from envs.options import Option, resolve_options
-from envs.rng import seeded_generator
+from envs.rng import seeded_generator, seeded_generators
 
 __all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_core", "seeded_generator"]
 
@@ -99,10 +99,11 @@ class BatchedCore:
         for seed in seeds:
             if seed is not None and (not isinstance(seed, _SEED_TYPES) or seed < 0):
                 raise ValueError(f"seed={seed!r} is invalid: expected a non-negative int or None")
+        seeded = iter(seeded_generators([seed for seed in seeds if seed is not None]))
         rngs = []
         for k, seed in zip(slots, seeds, strict=True):
             if seed is not None:
-                self.rngs[k] = seeded_generator(int(seed))
+                self.rngs[k] = next(seeded)
                 self.seeds[k] = int(seed)
             elif self.rngs[k] is None:
                 self.rngs[k] = np.random.default_rng()

@@ -13,8 +13,12 @@ words, which the hot loops of Mortar Mayhem and Mystery Path read directly, cann
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Sequence
+from functools import cache
+from typing import Any
 
 import numpy as np
+from numpy.random.bit_generator import ISpawnableSeedSequence
 
 _WORD = 1 << 32
 
@@ -53,6 +57,118 @@ def next_word(rng: np.random.Generator) -> int:
 def seeded_generator(seed: int) -> np.random.Generator:
     """The generator the reference builds for ``reset(seed=s)``: PCG64 over a SeedSequence of the seed."""
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed)))
+
+
+# numpy's SeedSequence: a pool of four 32-bit words filled by the hash of O'Neill's ``seed_seq_fe``; PCG64 takes its
+# first four 64-bit words of output. These are the hash's published constants.
+_POOL = 4
+_INIT_A, _MULT_A, _INIT_B, _MULT_B = 0x43B0D7E5, 0x931E8875, 0x8B51F9DD, 0x58F38DED
+_MIX_L, _MIX_NEG_R = 0xCA01F9DD, (1 << 32) - 0x4973F715  # mix(x, y) = L * x - R * y = L * x + (2**32 - R) * y
+_MIX_PAIRS = [(src, dst) for src in range(_POOL) for dst in range(_POOL) if src != dst]
+_BATCH_SEEDING_FROM = 3  # fewer seeds: numpy's own SeedSequence is as fast
+
+
+def _hash_constants(init: int, mult: int, count: int) -> list[tuple[int, int]]:
+    """The hash's (xor, multiplier) pair of each successive call: the constant advances by ``mult`` per call, so
+    the pairs do not depend on the data."""
+    pairs, value = [], init
+    for _ in range(count):
+        advanced = (value * mult) & 0xFFFFFFFF
+        pairs.append((value, advanced))
+        value = advanced
+    return pairs
+
+
+_HASH_POOL = _hash_constants(_INIT_A, _MULT_A, _POOL + len(_MIX_PAIRS))
+_HASH_OUT = _hash_constants(_INIT_B, _MULT_B, 2 * _POOL)
+
+
+@cache
+def _lane_constants(lanes: int) -> tuple[int, list[tuple[int, int]], list[tuple[int, int]], list[int]]:
+    """For ``lanes`` seeds packed one per 64-bit lane: the 32-bit mask, the hash constants repeated in every lane,
+    and the pool words that hash the zero padding of a one-word seed (the same for every seed)."""
+    ones = int.from_bytes(b"\x01\0\0\0\0\0\0\0" * lanes, "little")
+
+    def zero_word(xor: int, mult: int) -> int:
+        value = (xor * mult) & 0xFFFFFFFF
+        return (value ^ (value >> 16)) * ones
+
+    return (
+        0xFFFFFFFF * ones,
+        [(xor * ones, mult) for xor, mult in _HASH_POOL],
+        [(xor * ones, mult) for xor, mult in _HASH_OUT],
+        [zero_word(*pair) for pair in _HASH_POOL[1:_POOL]],
+    )
+
+
+def _seed_words(seeds: list[int]) -> np.ndarray:
+    """``SeedSequence(s).generate_state(4, np.uint64)`` for every seed ``s < 2**32``, as rows of a (seeds, 4) array.
+
+    All seeds at once: each Python int below holds one 64-bit lane per seed with a 32-bit value in it, so one
+    multiply, xor or shift steps the hash of every seed (a lane's 32-bit product fits its lane; the mask after each
+    step drops what a shift brought down from the next lane). ~40 such steps replace numpy's per-seed Python loop.
+    """
+    mask, pool_hash, out_hash, zero_words = _lane_constants(len(seeds))
+    xor, mult = pool_hash[0]
+    value = ((int.from_bytes(np.asarray(seeds, "<u8").tobytes(), "little") ^ xor) * mult) & mask
+    pool = [(value ^ (value >> 16)) & mask, *zero_words]
+    for (src, dst), (xor, mult) in zip(_MIX_PAIRS, pool_hash[_POOL:], strict=True):
+        hashed = ((pool[src] ^ xor) * mult) & mask
+        hashed = (hashed ^ (hashed >> 16)) & mask
+        value = (((pool[dst] * _MIX_L) & mask) + ((hashed * _MIX_NEG_R) & mask)) & mask
+        pool[dst] = (value ^ (value >> 16)) & mask
+    halves = []
+    for i, (xor, mult) in enumerate(out_hash):
+        value = ((pool[i % _POOL] ^ xor) * mult) & mask
+        halves.append((value ^ (value >> 16)) & mask)
+    # 64-bit words: the low half first, as numpy views its 32-bit output
+    words = [(halves[2 * i] | (halves[2 * i + 1] << 32)).to_bytes(8 * len(seeds), "little") for i in range(_POOL)]
+    return np.frombuffer(b"".join(words), "<u8").reshape(_POOL, len(seeds)).T.astype(np.uint64, order="C")
+
+
+class _SeedWords(ISpawnableSeedSequence):
+    """A ``SeedSequence(seed)`` whose PCG64 seed words were computed in a batch. PCG64 reads only those words; any
+    other use (``spawn``, ``entropy``, pickling) goes to a real SeedSequence of the seed, built on first use."""
+
+    __slots__ = ("seed", "words", "_sequence")
+
+    def __init__(self, seed: int, words: np.ndarray) -> None:
+        self.seed, self.words, self._sequence = seed, words, None
+
+    def sequence(self) -> np.random.SeedSequence:
+        if self._sequence is None:
+            self._sequence = np.random.SeedSequence(self.seed)
+        return self._sequence
+
+    def generate_state(self, n_words: int, dtype: Any = np.uint32) -> np.ndarray:
+        if n_words == _POOL and dtype is np.uint64:
+            return self.words
+        return self.sequence().generate_state(n_words, dtype)
+
+    def spawn(self, n_children: int) -> list[np.random.SeedSequence]:
+        return self.sequence().spawn(n_children)
+
+    def __getattr__(self, name: str) -> Any:  # entropy, spawn_key, pool, state, ...
+        return getattr(self.sequence(), name)
+
+    def __reduce__(self) -> Any:
+        return self.sequence().__reduce__()
+
+    def __repr__(self) -> str:
+        return repr(self.sequence())
+
+
+def seeded_generators(seeds: Sequence[int]) -> list[np.random.Generator]:
+    """``[seeded_generator(s) for s in seeds]``, with the SeedSequence hashes of the seeds below 2**32 computed
+    together when there are several (a reset of many slots): about a third of numpy's cost per generator."""
+    seeds = [int(seed) for seed in seeds]
+    batched = [i for i, seed in enumerate(seeds) if seed < _WORD]
+    if len(batched) < _BATCH_SEEDING_FROM:
+        return [seeded_generator(seed) for seed in seeds]
+    generators = [None] * len(seeds)
+    for i, words in zip(batched, _seed_words([seeds[i] for i in batched]), strict=True):
+        generators[i] = np.random.Generator(np.random.PCG64(_SeedWords(seeds[i], words)))
+    return [seeded_generator(seed) if rng is None else rng for seed, rng in zip(seeds, generators, strict=True)]
 
 
 def _pcg64(rng: np.random.Generator, user: str) -> np.random.PCG64:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from envs import rng as rng_module
-from envs.rng import BoundedDraws, next_word, seeded_generator
+from envs.rng import BoundedDraws, next_word, seeded_generator, seeded_generators
 
 
 def live_state(rng: np.random.Generator) -> dict:
@@ -128,3 +128,28 @@ def test_next_word_equals_numpy_32_bit_draws(leftover: bool) -> None:
         assert got == [int(theirs.integers(0, 2**32, dtype=np.uint32)) for _ in got]
         assert live_state(ours) == live_state(theirs)
         assert ours.integers(0, 1000, size=9).tolist() == theirs.integers(0, 1000, size=9).tolist()
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 7, 64])
+def test_batch_seeded_generators_equal_numpy_seeding(count: int) -> None:
+    # one-word seeds (batched, including the word's edges), and seeds of two or more words (numpy's own path)
+    pool = [0, 1, 2**31, 2**32 - 1, 2**32, 2**40 + 3, 10**30, *np.random.default_rng(count).integers(0, 2**32, 64)]
+    seeds = [int(seed) for seed in np.random.default_rng(count + 1).permutation(pool)[:count]]
+    for seed, rng in zip(seeds, seeded_generators(seeds), strict=True):
+        assert rng.bit_generator.state == seeded_generator(seed).bit_generator.state, seed
+        assert rng.integers(0, 2**63, 3).tolist() == seeded_generator(seed).integers(0, 2**63, 3).tolist()
+
+
+def test_batch_seeded_generators_keep_the_seed_sequence_uses() -> None:
+    import copy
+    import pickle
+
+    seeds = [5, 6, 7, 8]
+    rng, twin = seeded_generators(seeds)[0], seeded_generator(5)
+    sequence = rng.bit_generator.seed_seq
+    assert sequence.entropy == 5 and sequence.spawn_key == () and repr(sequence) == repr(twin.bit_generator.seed_seq)
+    assert (sequence.generate_state(3) == twin.bit_generator.seed_seq.generate_state(3)).all()
+    assert [child.integers(0, 1000) for child in rng.spawn(2)] == [child.integers(0, 1000) for child in twin.spawn(2)]
+    for clone in (pickle.loads(pickle.dumps(rng)), copy.deepcopy(rng)):
+        assert type(clone.bit_generator.seed_seq) is np.random.SeedSequence
+        assert clone.integers(0, 2**63, 4).tolist() == seeded_generator(5).integers(0, 2**63, 4).tolist()
