@@ -239,15 +239,16 @@ def hole_tables(max_radius: int) -> HoleTables:
 
 
 # ------------------------------------------------------------------------------------------------ blending
-def darken(rows: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16)."""
-    product = rows.astype(np.uint16)
-    product *= np.asarray(alpha, np.uint16)
-    share = product >> 8  # in place from here: fewer passes over the frames
-    share += product
-    share += 1
-    share >>= 8  # floor(product / 255), exact for products up to 255 * 255
-    return rows - share.astype(np.uint8)
+def darken(rows: np.ndarray, alpha: np.ndarray, holes: np.ndarray | None = None) -> np.ndarray:
+    """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16).
+
+    ``holes`` (0/255 bytes like ``rows``) keeps the bytes where it is 255: the lit picture inside the spotlights.
+    """
+    share = np.multiply(rows, np.asarray(alpha, np.uint16))
+    share //= 255  # (numpy divides by a constant without a division per element)
+    if holes is not None:
+        share &= ~holes
+    return np.subtract(rows, share, dtype=np.uint8, casting="unsafe")
 
 
 def lighten(rows: np.ndarray, alpha: int) -> np.ndarray:
@@ -1240,10 +1241,7 @@ class SearingSpotlightsCore(BatchedCore):
         lit = self.under[slots]
         alpha = self.alpha(slots)
         if alpha.any():
-            dark = darken(lit, alpha[:, None, None])
-            blended = np.bitwise_xor(dark, lit)  # the lit picture in the holes, the darkened one elsewhere
-            blended &= holes
-            blended ^= dark
+            blended = darken(lit, alpha[:, None, None], holes)  # the lit picture in the holes, darkened elsewhere
             for i in np.flatnonzero(self.rings[slots]).tolist():
                 self._draw_rings(int(slots[i]), blended[i], lit[i])
             lit = blended
@@ -1302,9 +1300,8 @@ class SearingSpotlightsCore(BatchedCore):
             top, left = int(centre.imag) + offset + margin, int(centre.real) + offset + margin
             pixels[top : top + disc.shape[0], left : left + disc.shape[1]] |= disc
         holes = np.repeat(pixels[margin:-margin, margin:-margin], 3, axis=1).astype(np.uint8) * 255
-        dark = darken(floor, np.array(self.alpha(k)))
         frames = np.zeros((2, SCREEN, ROW_BYTES), np.uint8)  # the picture and a scratch frame
-        frames[0] = dark ^ ((dark ^ floor) & holes)
+        frames[0] = darken(floor, np.array(self.alpha(k)), holes)
         if self.rings[k]:
             self._draw_rings(k, frames[0], floor)
         for name in ("coins", "agent") if self.endless else ("exit", "coins", "agent"):
