@@ -16,8 +16,8 @@ so a frame is ``hole_mask & under`` where
   pasted again, all slots in one scatter;
 * ``hole_mask`` is gathered row by row, straight into the frames, from one table of 0/255 rows, one row per
   horizontal span ``[lo, hi]``: every filled disc of pygame is a stack of such spans, so each spotlight
-  contributes one table row per screen row. A screen row crossed by several spotlights points to a scratch table
-  row instead, the OR of its spans.
+  contributes one table row per screen row. A screen row crossed by several spotlights gets the last span written
+  to it, and the other spans are OR-ed into the gathered row afterwards.
 
 Frames with a partly transparent darkness (the first steps while the light dims, ``light_threshold`` below 255)
 or with spotlight rings (``black_background``) blend ``under`` with the darkness using SDL's arithmetic,
@@ -194,6 +194,12 @@ def span_rows() -> np.ndarray:
     table[codes] = np.where((column >= lo[:, None]) & (column <= hi[:, None]), 255, 0)
     table.setflags(write=False)
     return table
+
+
+@cache
+def span_words() -> np.ndarray:
+    """:func:`span_rows` as 63 words per row, for OR-ing."""
+    return span_rows().view(np.uint32)
 
 
 class HoleTables:
@@ -581,11 +587,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.under = self.under_buffer[:n]  # what lies under the darkness: lit (blue or red) + hidden agent
         self.under_key = np.full(n, -1, i64)  # what ``under`` shows (see ``_update_under``); -1: to rebuild
         self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: its row of ``span_table``
-        # the span table, then scratch rows for frame rows crossed by several spans
-        self.span_table = np.zeros((SPAN_CODES + n * SCREEN, ROW_BYTES), np.uint8)
-        self.span_table[:SPAN_CODES] = span_rows()
-        self.span_words = self.span_table.view(np.uint32)  # the same rows as 63 words, for OR-ing
-        self.span_claim = np.zeros(n * SCREEN, np.intp)  # scratch for ``_merge_lost_spans``
+        self.span_claim = np.zeros(n * SCREEN, np.intp)  # scratch for ``_or_lost_spans``
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
@@ -1047,7 +1049,7 @@ class SearingSpotlightsCore(BatchedCore):
         """Write the 0/255 masks of this step's spotlight holes into ``out`` ((n, 84, 252)), gathered row by row.
 
         Each disc row writes its span code into its frame row; one gather from the span table then yields every
-        row. A row crossed by several spotlights gets a scratch table row instead: the OR of all its spans.
+        row with the last span written to it. The spans that lost their row to another one are OR-ed in after.
         """
         tables = self.tables
         local, j = np.nonzero(drawn)
@@ -1062,39 +1064,30 @@ class SearingSpotlightsCore(BatchedCore):
         index = self.span_index[: out.shape[0] * SCREEN]
         index.fill(0)
         index[keys] = codes
+        rows = out.reshape(-1, ROW_BYTES)
+        np.take(span_rows(), index, axis=0, out=rows, mode="clip")
         lost = np.flatnonzero(index[keys] != codes)  # spans that lost their row to another one
         if lost.size:
-            self._merge_lost_spans(index, keys[lost], codes[lost])
-        np.take(self.span_table, index, axis=0, out=out.reshape(-1, ROW_BYTES), mode="clip")
+            self._or_lost_spans(rows.view(ROW).reshape(-1), keys[lost], codes[lost])
 
-    def _merge_lost_spans(self, index: np.ndarray, keys: np.ndarray, codes: np.ndarray) -> None:
-        """Point the frame rows ``keys`` (crossed by the spans ``codes`` besides the one in ``index``) to scratch
-        table rows holding the OR of all their spans.
-
-        Each lost span gets a scratch row (the OR of its span and the row's kept one); one lost span per frame row
-        owns the row, and the others are OR-ed into the owner's scratch row, a layer at a time (no sorting).
-        """
-        count = keys.size
-        if SPAN_CODES + count > self.span_table.shape[0]:  # many spotlights: more scratch rows
-            grown = np.zeros((SPAN_CODES + 2 * count, ROW_BYTES), np.uint8)
-            grown[:SPAN_CODES] = span_rows()
-            self.span_table, self.span_words = grown, grown.view(np.uint32)
-            self.span_claim = np.zeros(2 * count, np.intp)
-        words = self.span_words
-        unions = words[SPAN_CODES : SPAN_CODES + count]
-        np.take(words, index[keys], axis=0, out=unions)  # the span that kept the row
-        unions |= np.take(words, codes, axis=0)
-        position = np.arange(count)
-        index[keys] = position + SPAN_CODES  # the last writer owns the row
-        owner = index[keys] - SPAN_CODES
-        pending = np.flatnonzero(owner != position)
+    def _or_lost_spans(self, rows: np.ndarray, keys: np.ndarray, codes: np.ndarray) -> None:
+        """OR the spans ``codes`` into the frame ``rows`` (items of one row) ``keys``, a layer at a time: one span
+        per row in each layer (a row crossed by several lost spans takes several layers, usually one or two)."""
+        words = span_words()
         claim = self.span_claim
-        while pending.size:  # rows with several lost spans (one layer per extra span: usually one or two)
-            target = owner[pending]
-            claim[target] = pending
-            won = claim[target] == pending
-            unions[target[won]] |= unions[pending[won]]
-            pending = pending[~won]
+        while keys.size:
+            position = np.arange(keys.size)
+            claim[keys] = position  # the last span of each row claims it for this layer
+            layer = claim[keys] == position
+            if layer.all():
+                keys_now, codes_now = keys, codes
+                keys = keys[:0]
+            else:
+                keys_now, codes_now = keys[layer], codes[layer]
+                keys, codes = keys[~layer], codes[~layer]
+            union = rows[keys_now]
+            union.view(np.uint32).reshape(keys_now.size, -1)[:] |= np.take(words, codes_now, axis=0)
+            rows[keys_now] = union
 
     def _under_keys(self, idx: Index, red: np.ndarray | int) -> np.ndarray:
         """What the picture under the darkness shows, as one number per slot: agent sprite id + 1 (0: none), its
