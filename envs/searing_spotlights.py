@@ -23,6 +23,10 @@ Frames with a partly transparent darkness (the first steps while the light dims,
 or with spotlight rings (``black_background``) blend ``under`` with the darkness using SDL's arithmetic,
 ``D + trunc((S - D) * A / 255)``. The HUD rows come from small row tables.
 
+A frame is a function of the state (the spotlights keep where they were drawn), so ``observations()`` hands the
+frame buffer itself to the caller and the core continues in a new one; the few frames it must read before drawing
+them again (a partial step or a reset leaves the others as they were) are drawn again from the state.
+
 Mechanics per step are array operations as well: settings that depend only on the episode's options (velocities,
 bounds, the alpha of every step, draw orders) are derived once per distinct option set; whether the agent touches a
 coin or the exit is one lookup in a per-slot map of touching positions; spotlights are records in list order, with
@@ -582,6 +586,8 @@ class SearingSpotlightsCore(BatchedCore):
         # pictures, as (84, 252) rows per slot
         self.frame_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
         self.frames = self.frame_buffer[:n]
+        self.frames_lent = False  # the frame buffer was handed to a caller (see ``observations``)
+        self.stale = np.zeros(n, bool)  # frames to draw again (from the state) before they are read
         self.lit = np.zeros((2, n, SCREEN, ROW_BYTES), np.uint8)  # floor + coins + exit; blue and red floor
         self.under_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
         self.under = self.under_buffer[:n]  # what lies under the darkness: lit (blue or red) + hidden agent
@@ -773,7 +779,9 @@ class SearingSpotlightsCore(BatchedCore):
         alpha = int(record["alphas"][0])
         out[:-1] = darken(self.under[idx], np.array(alpha)) if alpha else self.under[idx]
         self._finish_frames(idx, out)
+        self._frames_to_write()
         self.frames[idx] = out[:-1]
+        self.stale[idx] = False
 
     def _draw_level(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> None:
         """Slot k's agent, first spotlights, coins and exit, with the reference's draws in its order."""
@@ -1015,23 +1023,39 @@ class SearingSpotlightsCore(BatchedCore):
 
     # ---------------------------------------------------------------------------------------------- draw
     def _draw(self, idx: Index, slots: np.ndarray, n: int, hit: np.ndarray, hud_code: np.ndarray, spots) -> None:
-        """Compose the frames of the stepped slots (see the module docstring)."""
+        """Bring the pictures under the darkness and the HUD up to date, then draw the stepped slots' frames."""
         self._update_under(idx, hit & self.red_feedback[idx])
-        full = isinstance(idx, slice)
-        buffer = self.frame_buffer if full else np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
-        out = buffer[:n]
-        self._hole_masks(out, *spots)
-        blend = np.flatnonzero(self.t[idx] < self.blend_until[idx])
-        holes = out[blend] if blend.size else None  # (a copy) the blended frames need their holes
-        np.bitwise_and(out, self.under[:n] if full else self.under[idx], out=out)
-        if blend.size:
-            self._blend_slots(slots[blend], blend, holes, out)
         self.hud[idx, ROW_BYTES // 2 :] = hud_tables()[1][hud_code]
         if hit.any():
             self._paint_red(idx, slots, hud_code)
-        self._finish_frames(idx, buffer)
-        if not full:
-            self.frames[idx] = out
+        if isinstance(idx, slice):
+            self._draw_frames(idx, self._frames_to_write(), spots)
+            self.stale.fill(False)
+        else:
+            out = np.empty((n + 1, SCREEN, ROW_BYTES), np.uint8)
+            self._draw_frames(idx, out, spots)
+            self._frames_to_write()
+            self.frames[idx] = out[:-1]
+            self.stale[idx] = False
+
+    def _draw_frames(self, idx: Index, out: np.ndarray, spots: tuple | None = None) -> None:
+        """Draw the frames of the slots ``idx`` into ``out`` (their frames, then a scratch frame) from the state: the
+        holes of the spotlights drawn in the last step (``spots``: their centres, table offsets and drawn flags, read
+        from the spotlight records when not given), the picture under the darkness and the HUD (see the module
+        docstring)."""
+        if spots is None:
+            width = int(self.spot_count[idx].max(initial=0))
+            records = as_bytes(self.spots)[idx, :width].view(SPOTS)
+            spots = records["centre"], records["base"], records["drawn"]
+        frames = out[:-1]
+        self._hole_masks(frames, *spots)
+        blend = np.flatnonzero(self.t[idx] < self.blend_until[idx])
+        holes = frames[blend] if blend.size else None  # (a copy) the blended frames need their holes
+        full = isinstance(idx, slice)
+        np.bitwise_and(frames, self.under if full else self.under[idx], out=frames)
+        if blend.size:
+            self._blend_slots(self.all_slots[idx][blend], blend, holes, frames)
+        self._finish_frames(idx, out)
 
     def _paint_red(self, idx: Index, slots: np.ndarray, hud_code: np.ndarray) -> None:
         """The HUD's health bar after a hit: red from the left, as wide as the lost share of the health."""
@@ -1262,8 +1286,39 @@ class SearingSpotlightsCore(BatchedCore):
         frame[outline] = lighten(under, int(self.alpha(k)))[outline]
 
     # ------------------------------------------------------------------------------------------ faces
+    def observations(self, idx: np.ndarray | None = None) -> np.ndarray:
+        """Copies of the current observations. All of them come without a copy: the frame buffer itself is handed
+        over, and the core continues in a new one (frames it has to read before drawing them again are drawn again
+        from the state, see ``_current_frames``)."""
+        if idx is not None:
+            return super().observations(idx)
+        frames = self._current_frames(slice(None))
+        self.frames_lent = True
+        return frames.reshape(-1, SCREEN, SCREEN, 3)
+
+    def _frames_to_write(self) -> np.ndarray:
+        """The frame buffer (the frames, then a scratch frame), ready to be written: a new one, with every frame
+        stale, if the current one was handed over."""
+        if self.frames_lent:
+            self.frame_buffer = np.empty_like(self.frame_buffer)
+            self.frames = self.frame_buffer[:-1]
+            self.stale.fill(True)
+            self.frames_lent = False
+        return self.frame_buffer
+
+    def _current_frames(self, idx: Index) -> np.ndarray:
+        """The frames, with those of the slots ``idx`` up to date."""
+        self._frames_to_write()
+        redraw = self.all_slots[idx][self.stale[idx]]
+        if redraw.size:
+            out = np.empty((redraw.size + 1, SCREEN, ROW_BYTES), np.uint8)
+            self._draw_frames(redraw, out)
+            self.frames[redraw] = out[:-1]
+            self.stale[redraw] = False
+        return self.frames
+
     def _observation(self, idx: Index) -> np.ndarray:
-        return self.frames[idx].reshape(-1, SCREEN, SCREEN, 3)
+        return self._current_frames(idx)[idx].reshape(-1, SCREEN, SCREEN, 3)
 
     def _final_info(self, k: int) -> dict[str, Any]:
         info: dict[str, Any] = {"agent_health": float(self.health[k] / self.max_health[k])}

@@ -566,6 +566,31 @@ def test_vector_env_matches_single_envs(env_id: str) -> None:
     assert resets >= 3
 
 
+@pytest.mark.parametrize("env_id", IDS)
+def test_observations_hand_over_the_frames_and_the_core_draws_them_again(env_id: str) -> None:
+    """``observations()`` hands its frame buffer to the caller: writing into it changes nothing in the core, and
+    frames read before they are drawn again (partial steps, resets, other reads) are drawn from the state; a core
+    that only hands out gathered copies sees the same frames."""
+    lender, copier = (envs.make_core(env_id, num_envs=4, options={"light_dim_off_duration": 3}) for _ in range(2))
+    for core in (lender, copier):
+        core.reset_slots(range(4), [7, 8, 9, 10])
+    everyone = np.arange(4)
+    rng = np.random.default_rng(5)
+    for t in range(60):
+        actions = rng.integers(0, 3, (4, 2))
+        idx = None if t % 3 else np.sort(rng.permutation(4)[: rng.integers(1, 4)])
+        for core in (lender, copier):
+            _, terminated, _ = core.step(actions if idx is None else actions[idx], idx=idx)
+            if t % 7 == 0:
+                core.reset_slots([t % 4])
+        lent = lender.observations()
+        expected = copier.observations(everyone)
+        np.testing.assert_array_equal(lent, expected)
+        assert not np.shares_memory(lent, lender.observations())  # a second read: drawn again, not the same buffer
+        lent[:] = 99  # the caller owns it
+        np.testing.assert_array_equal(lender.agent_frame(t % 4), expected[t % 4])
+
+
 def test_endless_first_coin_can_spawn_within_reach_of_the_agent() -> None:
     """Quirk 19 (kept): the sampler is cleared before the first coin, so it may land on the agent."""
     env = make("Endless-SearingSpotlights-v0")
@@ -581,7 +606,7 @@ def test_endless_first_coin_can_spawn_within_reach_of_the_agent() -> None:
 
 
 def test_hole_masks_of_many_overlapping_spotlights_are_the_union_of_their_discs() -> None:
-    """Rows crossed by many spotlights (several lost spans per row, more than the scratch rows at first)."""
+    """Rows crossed by many spotlights (several lost spans per row, OR-ed in over several layers)."""
     from envs.drawing import disc_mask
 
     core = SearingSpotlightsCore(num_envs=2)
