@@ -351,7 +351,7 @@ def sample_position(
     if empty:
         cell = int(rng.integers(0, SCREEN * SCREEN))
     else:
-        free = np.flatnonzero(~mask)
+        free = (~mask).reshape(-1).nonzero()[0]
         if free.size == 0:
             raise RuntimeError("no free spawn position left: too many coins for the arena (reduce num_coins)")
         cell = int(free[rng.integers(0, free.size)])
@@ -771,7 +771,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.under_key[idx] = key
         self.under[idx] = self.lit[0, idx]
         hidden = key >> 15 > 0
-        if hidden.any():
+        if np.count_nonzero(hidden):
             paste = idx[hidden]
             self._paste_agents(self.under_buffer, paste, (key[hidden] >> 15) - 1, self.x[paste], self.y[paste])
         # the reset frames: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
@@ -851,12 +851,12 @@ class SearingSpotlightsCore(BatchedCore):
         self.t[idx] = t
         # 4. spotlights: maybe spawn one, then draw, move and hit-test every spotlight in list order
         spawn = t == self.next_spawn[idx]
-        if spawn.any():
+        if np.count_nonzero(spawn):
             self._spawn_spots(slots[spawn])
         hit, spots = self._spotlight_pass(idx, pos)
         self.hit[idx] = hit
         dead = None
-        if hit.any():
+        if np.count_nonzero(hit):
             rewards = np.where(hit, self.reward_inside[idx], self.reward_outside[idx])
             health = self.health[idx] - self.spot_damage[idx] * hit
             self.health[idx] = health
@@ -868,8 +868,8 @@ class SearingSpotlightsCore(BatchedCore):
         # 5.-7. coins and exit (a lookup of what touches the agent's position), termination
         touching = self.item_map[slots, pos[:, 1], pos[:, 0]]
         terminated = t == self.end_t_now[idx]
-        if touching.any():
-            self._item_events(slots, np.flatnonzero(touching), touching, rewards, terminated, dead)
+        if np.count_nonzero(touching):
+            self._item_events(slots, touching.nonzero()[0], touching, rewards, terminated, dead)
         if dead is not None:
             terminated |= dead
         # 8. the HUD of the next step shows this action and whether this reward was positive
@@ -971,11 +971,11 @@ class SearingSpotlightsCore(BatchedCore):
         done = spots["done"]
         drawn = spots["listed"]
         removed = None
-        if done.any():  # (done is written below: ``removed`` and ``drawn`` are computed first)
+        if np.count_nonzero(done):  # (done is written below: ``removed`` and ``drawn`` are computed first)
             # The reference removes finished spotlights while iterating over its list, so the spotlight right
             # after a removed one is not visited in that step: not drawn, not moved, unable to hit.
             drawn, removed = drawn.copy(), np.zeros_like(done)
-            for i in np.flatnonzero(done.any(axis=1)):
+            for i in done.any(axis=1).nonzero()[0]:
                 visited, skip = [], False
                 for finished in done[i].tolist():
                     visited.append(not skip)
@@ -1002,14 +1002,14 @@ class SearingSpotlightsCore(BatchedCore):
             self.spots["drawn"][idx, :width] = drawn
         if store_drawn:  # (else every listed spotlight was drawn in this and the last step)
             self.drawn_is_listed = removed is None and isinstance(idx, slice)
-        if removed is not None and removed.any():
+        if removed is not None and np.count_nonzero(removed):
             base = base.copy()  # a view of the arrays that the removal compacts
             self._remove_spots(idx, removed)
         return hits.any(axis=1), (centre, base, drawn)
 
     def _remove_spots(self, idx: Index, removed: np.ndarray) -> None:
         """Compact the spotlight lists (keeping their order); freed positions get the unused values."""
-        local = np.flatnonzero(removed.any(axis=1))
+        local = removed.any(axis=1).nonzero()[0]
         slots = self.all_slots[idx][local]
         width = removed.shape[1]  # (positions past it are unused)
         spots = as_bytes(self.spots)[slots, :width]
@@ -1026,7 +1026,7 @@ class SearingSpotlightsCore(BatchedCore):
         """Bring the pictures under the darkness and the HUD up to date, then draw the stepped slots' frames."""
         self._update_under(idx, hit & self.red_feedback[idx])
         self.hud[idx, ROW_BYTES // 2 :] = hud_tables()[1][hud_code]
-        if hit.any():
+        if np.count_nonzero(hit):
             self._paint_red(idx, slots, hud_code)
         if isinstance(idx, slice):
             self._draw_frames(idx, self._frames_to_write(), spots)
@@ -1049,7 +1049,7 @@ class SearingSpotlightsCore(BatchedCore):
             spots = records["centre"], records["base"], records["drawn"]
         frames = out[:-1]
         self._hole_masks(frames, *spots)
-        blend = np.flatnonzero(self.t[idx] < self.blend_until[idx])
+        blend = (self.t[idx] < self.blend_until[idx]).nonzero()[0]
         holes = frames[blend] if blend.size else None  # (a copy) the blended frames need their holes
         full = isinstance(idx, slice)
         np.bitwise_and(frames, self.under if full else self.under[idx], out=frames)
@@ -1062,7 +1062,7 @@ class SearingSpotlightsCore(BatchedCore):
         left = hud_tables()[0]
         red = self.hud_red[idx]
         self.hud[idx, : ROW_BYTES // 2] = left[np.minimum(red, SCREEN // 2)]
-        for i in np.flatnonzero(red > SCREEN // 2):  # health below 0: the red part reaches into the right half
+        for i in (red > SCREEN // 2).nonzero()[0]:  # health below 0: the red part reaches into the right half
             flags, code = divmod(int(hud_code[i]), 27)
             action, reward_state = (code // 9, code // 3 % 3), code % 3
             self.hud[slots[i]] = paint_hud_row(
@@ -1078,8 +1078,8 @@ class SearingSpotlightsCore(BatchedCore):
         tables = self.tables
         local, j = np.nonzero(drawn)
         centre, base = centre[local, j], base[local, j]
-        codes = np.take(tables.codes, centre.real.astype(np.intp) + base, axis=0)  # (spotlights, disc rows)
-        keys = np.take(tables.rows, centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
+        codes = tables.codes.take(centre.real.astype(np.intp) + base, axis=0)  # (spotlights, disc rows)
+        keys = tables.rows.take(centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
         visible = (codes != 0) & (keys != 0)
         codes *= visible
         keys *= visible  # empty spans go to row 0 (under the HUD), where they cannot collide
@@ -1089,8 +1089,8 @@ class SearingSpotlightsCore(BatchedCore):
         index.fill(0)
         index[keys] = codes
         rows = out.reshape(-1, ROW_BYTES)
-        np.take(span_rows(), index, axis=0, out=rows, mode="clip")
-        lost = np.flatnonzero(index[keys] != codes)  # spans that lost their row to another one
+        span_rows().take(index, axis=0, out=rows, mode="clip")
+        lost = (index[keys] != codes).nonzero()[0]  # spans that lost their row to another one
         if lost.size:
             self._or_lost_spans(rows.view(ROW).reshape(-1), keys[lost], codes[lost])
 
@@ -1110,7 +1110,7 @@ class SearingSpotlightsCore(BatchedCore):
                 keys_now, codes_now = keys[layer], codes[layer]
                 keys, codes = keys[~layer], codes[~layer]
             union = rows[keys_now]
-            union.view(np.uint32).reshape(keys_now.size, -1)[:] |= np.take(words, codes_now, axis=0)
+            union.view(np.uint32).reshape(keys_now.size, -1)[:] |= words.take(codes_now, axis=0)
             rows[keys_now] = union
 
     def _under_keys(self, idx: Index, red: np.ndarray | int) -> np.ndarray:
@@ -1134,7 +1134,7 @@ class SearingSpotlightsCore(BatchedCore):
         pasted again."""
         key = self._under_keys(idx, red)
         old = self.under_key[idx]
-        changed = np.flatnonzero(key != old)
+        changed = (key != old).nonzero()[0]
         if not changed.size:
             return
         slots, key, old, red = self.all_slots[idx][changed], key[changed], old[changed], red[changed]
@@ -1144,17 +1144,17 @@ class SearingSpotlightsCore(BatchedCore):
         lit_rows, under_rows = self.lit.view(ROW).reshape(-1), self.under.view(ROW).reshape(-1)
         source = red * n + slots  # the slots' lit pictures in ``lit`` seen as 2n pictures
         rebuild = (old < 0) | ((old ^ key) & 1).astype(bool)
-        if rebuild.any():
+        if np.count_nonzero(rebuild):
             self.under[slots[rebuild]] = self.lit.reshape(-1, SCREEN, ROW_BYTES)[source[rebuild]]
-        erase = np.flatnonzero(~rebuild & (old >> 15 > 0))  # an agent was drawn: copy its rows back
+        erase = (~rebuild & (old >> 15 > 0)).nonzero()[0]  # an agent was drawn: copy its rows back
         if erase.size:
             old_id = (old[erase] >> 15) - 1
             half = self.agent_sprites.heights[old_id] // 2
             top = (old[erase] >> 8 & 127) - half
             height = int(self.agent_sprites.heights[old_id].max())
-            rows = np.clip(top[:, None] + np.arange(height), 0, SCREEN - 1)
+            rows = np.minimum(np.maximum(top[:, None] + np.arange(height), 0), SCREEN - 1)
             under_rows[slots[erase, None] * SCREEN + rows] = lit_rows[source[erase, None] * SCREEN + rows]
-        paste = np.flatnonzero(ids >= 0)
+        paste = (ids >= 0).nonzero()[0]
         if paste.size:
             self._paste_agents(self.under_buffer, slots[paste], ids[paste], self.x[slots[paste]], self.y[slots[paste]])
 
@@ -1202,7 +1202,7 @@ class SearingSpotlightsCore(BatchedCore):
         rows[1] = floor_rows(kind, bool(self.red_feedback[k]))
         if self.coins_left[k]:
             coin, radius = coin_sprite(float(self.coin_scale[k])), int(10 * self.coin_scale[k])
-            for j in np.flatnonzero(self.coin_alive[k]):
+            for j in self.coin_alive[k].nonzero()[0]:
                 paste_centred(coin, rows, self.coin_x[k, j], self.coin_y[k, j], centre=radius)
         if self.use_exit[k]:
             door = exit_sprite(float(self.exit_scale[k]), bool(self.exit_open[k]))
@@ -1215,7 +1215,7 @@ class SearingSpotlightsCore(BatchedCore):
             self._paste_agents(frames, np.array([i]), self._agent_ids(slot), self.x[slot], self.y[slot])
         elif name == "coins":
             coin, radius = coin_sprite(float(self.coin_scale[k])), int(10 * self.coin_scale[k])
-            for j in np.flatnonzero(self.coin_alive[k]):
+            for j in self.coin_alive[k].nonzero()[0]:
                 paste_centred(coin, frames[i], self.coin_x[k, j], self.coin_y[k, j], centre=radius)
         else:
             door = exit_sprite(float(self.exit_scale[k]), bool(self.exit_open[k]))
@@ -1231,13 +1231,13 @@ class SearingSpotlightsCore(BatchedCore):
         ``out`` holds the frames of the slots ``idx`` followed by a scratch frame.
         """
         slots = self.all_slots[idx]
-        if self.endless or self.any_visible.any():  # slots drawing an entity above the darkness
-            special = np.flatnonzero(self.t[idx] < self.special_until[idx])
+        if self.endless or np.count_nonzero(self.any_visible):  # slots drawing an entity above the darkness
+            special = (self.t[idx] < self.special_until[idx]).nonzero()[0]
         else:
             special = ()
         if self.endless and len(special):  # the new coin, the only entity above the darkness: pasted at once
             alone = ~self.any_visible[slots[special]]
-            if alone.any():
+            if np.count_nonzero(alone):
                 self._paste_coins(out, special[alone], slots[special[alone]])
                 special = special[~alone]
         for i in special:
@@ -1257,9 +1257,9 @@ class SearingSpotlightsCore(BatchedCore):
         """
         lit = self.under[slots]
         alpha = self.alpha(slots)
-        if alpha.any():
+        if np.count_nonzero(alpha):
             blended = darken(lit, alpha[:, None, None], holes)  # the lit picture in the holes, darkened elsewhere
-            for i in np.flatnonzero(self.rings[slots]).tolist():
+            for i in self.rings[slots].nonzero()[0].tolist():
                 self._draw_rings(int(slots[i]), blended[i], lit[i])
             lit = blended
         out[local] = lit
@@ -1271,7 +1271,7 @@ class SearingSpotlightsCore(BatchedCore):
         """
         state = np.zeros((SCREEN, SCREEN), np.int8)  # 0 darkness, 1 hole, 2 outline
         spots = self.spots[k]
-        for j in np.flatnonzero(spots["drawn"]):
+        for j in spots["drawn"].nonzero()[0]:
             centre, radius = spots["centre"][j], int(spots["radius"][j])
             disc, offset = disc_mask(radius)
             ring = ring_mask(radius)
