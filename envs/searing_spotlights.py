@@ -253,12 +253,15 @@ def darken(rows: np.ndarray, alpha: np.ndarray, holes: np.ndarray | None = None)
     """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16).
 
     ``holes`` (0/255 bytes like ``rows``) keeps the bytes where it is 255: the lit picture inside the spotlights.
+    Every pass has one dtype: numpy's mixed-dtype loops are buffered and several times slower.
     """
-    share = np.multiply(rows, np.asarray(alpha, np.uint16))
-    share //= 255  # (numpy divides by a constant without a division per element)
+    product = rows.astype(np.uint16)
+    product *= np.asarray(alpha, np.uint16)
+    product //= 255  # (numpy divides by a constant without a division per element)
+    share = product.astype(np.uint8)
     if holes is not None:
         share &= ~holes
-    return np.subtract(rows, share, dtype=np.uint8, casting="unsafe")
+    return np.subtract(rows, share, out=share)
 
 
 def lighten(rows: np.ndarray, alpha: int) -> np.ndarray:
