@@ -222,8 +222,9 @@ class HoleTables:
         self.width = 2 * reach + 1
         centres = np.arange(self.low, self.low + self.width)
         depth = 2 * max_radius
-        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.intp)
-        self.rows = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.intp)
+        # (int16: small tables and small gathered copies stay in the cache; a code is below 2**12, a row below 84)
+        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.int16)
+        self.rows = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.int16)
         for radius in range(1, max_radius + 1):
             mask, offset = disc_mask(radius)
             block = slice(radius * self.width, (radius + 1) * self.width)
@@ -595,7 +596,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.under_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
         self.under = self.under_buffer[:n]  # what lies under the darkness: lit (blue or red) + hidden agent
         self.under_key = np.full(n, -1, i64)  # what ``under`` shows (see ``_update_under``); -1: to rebuild
-        self.span_index = np.zeros(n * SCREEN, np.intp)  # per frame row: its row of ``span_table``
+        self.span_index = np.zeros(n * SCREEN, np.int16)  # per frame row: the code of its span (see ``span_rows``)
         self.span_claim = np.zeros(n * SCREEN, np.intp)  # scratch for ``_or_lost_spans``
 
     # ------------------------------------------------------------------------------------------- options
@@ -1083,11 +1084,13 @@ class SearingSpotlightsCore(BatchedCore):
         centre, base = centre[local, j], base[local, j]
         codes = tables.codes.take(centre.real.astype(np.intp) + base, axis=0)  # (spotlights, disc rows)
         keys = tables.rows.take(centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
-        visible = (codes != 0) & (keys != 0)
+        visible = np.minimum(codes, 1)  # (0/1 in the tables' dtype: numpy's mixed-dtype loops are slower)
+        visible *= np.minimum(keys, 1)
         codes *= visible
         keys *= visible  # empty spans go to row 0 (under the HUD), where they cannot collide
+        keys = keys.astype(np.intp)  # (flat intp arrays: several times faster to scatter)
         keys += local[:, None] * SCREEN
-        keys, codes = keys.ravel(), codes.ravel()  # (flat intp arrays: several times faster to scatter)
+        keys, codes = keys.ravel(), codes.ravel()
         index = self.span_index[: out.shape[0] * SCREEN]
         index.fill(0)
         index[keys] = codes
