@@ -397,6 +397,7 @@ ACTION_WEIGHTS = np.array([3, 1])
 NEXT_HEADING = np.where(ACTION_HEADING[None, :] < 0, np.arange(8)[:, None], ACTION_HEADING[None, :])  # [heading, code]
 ROW = np.dtype((np.void, ROW_BYTES))  # one frame row as a single item, for fast row gathers and scatters
 NEVER = np.iinfo(np.int64).max
+UNDER_KEY_POSITION = np.array([1 << 1, 1 << 8])  # (x, y) -> their bits in the under key
 SCREEN_CENTRE = pygame.math.Vector2(CENTRE, CENTRE)
 
 
@@ -456,6 +457,8 @@ SETTINGS = np.dtype(
         ("hud_flags27", np.int64),  # 27 * (4 * endless + 2 * show_last_action + show_last_positive_reward)
         ("hud_next", np.int64),  # hud_flags27 + 1: the base of the next step's HUD code
         ("agent_hidden", bool),
+        ("agent_key", np.int64),  # the hidden agent's part of the under key (see ``_under_keys``), facing up
+        ("heading_key", np.int64),  # what a heading step adds to it
         ("any_visible", bool),  # some entity is drawn above the darkness
         ("coins_visible", bool),
         ("coin_show_duration", np.int64),
@@ -564,6 +567,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.all_slots = np.arange(n)
         self.row_base = self.all_slots[:, None, None] * SCREEN  # first frame row of each slot
         self.settings = np.zeros(n, SETTINGS)
+        self.settings_bytes = as_bytes(self.settings)
         for name in SETTINGS.names:  # attribute views of the settings columns
             setattr(self, name, self.settings[name])
         self.orders: list[dict[bool, tuple[tuple[str, ...], tuple[str, ...]]]] = [{} for _ in range(n)]
@@ -573,6 +577,7 @@ class SearingSpotlightsCore(BatchedCore):
         # episode state
         i64 = np.int64
         self.episode = np.zeros(n, EPISODE)
+        self.episode_bytes = as_bytes(self.episode)
         for name in EPISODE.names:  # attribute views of the state columns
             setattr(self, name, self.episode[name])
         self.x, self.y = self.pos[:, 0], self.pos[:, 1]
@@ -655,6 +660,8 @@ class SearingSpotlightsCore(BatchedCore):
         dark = np.flatnonzero(alphas == 255)
         record["blend_until"] = NEVER if opts["black_background"] or not dark.size else dark[0]
         record["agent_hidden"] = not opts["agent_visible"]
+        record["heading_key"] = int(record["agent_hidden"]) << 15
+        record["agent_key"] = (int(record["agent_sprite0"]) + 1) * int(record["heading_key"])
         record["coins_visible"] = opts["coins_visible"]
         record["coin_scale"] = opts["coin_scale"]
         record["coin_sprite"] = self.coin_sprites.add((coin_sprite(float(opts["coin_scale"])),))
@@ -706,7 +713,9 @@ class SearingSpotlightsCore(BatchedCore):
         grown = np.full((self.num_envs, capacity), self.unused_spot, SPOTS)
         grown[:, : self.spots.shape[1]] = self.spots
         self.spots = grown
+        self.spot_bytes = as_bytes(grown)  # (byte views made once: whole-record copies in resets and removals)
         self.unused_row = np.full(capacity, self.unused_spot, SPOTS)  # a list of unused positions, to copy from
+        self.unused_row_bytes = as_bytes(self.unused_row)
 
     def _use_tables(self, max_radius: int) -> None:
         """Switch to hole tables that cover ``max_radius`` (the spotlights' table offsets are recomputed)."""
@@ -714,6 +723,7 @@ class SearingSpotlightsCore(BatchedCore):
             self.tables = hole_tables(max_radius)
             self.unused_spot = self._unused_spot_record()
             self.unused_row = np.full(self.spots.shape[1], self.unused_spot, SPOTS)
+            self.unused_row_bytes = as_bytes(self.unused_row)
             self.spots["base"] = self.tables.base(self.spots["radius"])
 
     def _new_spot(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> tuple:
@@ -743,15 +753,15 @@ class SearingSpotlightsCore(BatchedCore):
         """New episodes with the same options: per-slot draws in the reference's order, the rest for all at once."""
         record, orders, start, record_bytes, start_bytes = self._episode_settings(opts)
         idx = np.array(slots, dtype=np.int64)
-        as_bytes(self.settings)[idx] = record_bytes
-        as_bytes(self.episode)[idx] = start_bytes
+        self.settings_bytes[idx] = record_bytes
+        self.episode_bytes[idx] = start_bytes
         for k in slots:
             self.orders[k] = orders
         self._use_tables(int(opts["spot_max_radius"]))
         count = opts["initial_spawns"]
         if count > self.spots.shape[1]:
             self._grow_spots(max(count, 2 * self.spots.shape[1]))
-        as_bytes(self.spots)[idx, count:] = as_bytes(self.unused_row[count:])
+        self.spot_bytes[idx, count:] = self.unused_row_bytes[count:]
         self.drawn_is_listed = False
         self.item_map[idx] = 0
         if not self.endless:
@@ -962,7 +972,7 @@ class SearingSpotlightsCore(BatchedCore):
         spotlights.
         """
         width = int(self.spot_count[idx].max())  # list positions past every slot's count are unused
-        spots = self.spots[idx, :width] if isinstance(idx, slice) else as_bytes(self.spots)[idx, :width].view(SPOTS)
+        spots = self.spots[idx, :width] if isinstance(idx, slice) else self.spot_bytes[idx, :width].view(SPOTS)
         tau = spots["tau"]
         rest = 1.0 - tau
         centre = spots["start"] * rest  # pygame's lerp a * (1 - t) + b * t, twice: a curve from S to O
@@ -1016,13 +1026,13 @@ class SearingSpotlightsCore(BatchedCore):
         local = removed.any(axis=1).nonzero()[0]
         slots = self.all_slots[idx][local]
         width = removed.shape[1]  # (positions past it are unused)
-        spots = as_bytes(self.spots)[slots, :width]
+        spots = self.spot_bytes[slots, :width]
         keep = self.spots["listed"][slots, :width] & ~removed[local]
         order = np.argsort(~keep, axis=1, kind="stable")
         compacted = np.take_along_axis(spots, order, axis=1)
         count = keep.sum(axis=1)
         compacted[np.arange(compacted.shape[1])[None, :] >= count[:, None]] = as_bytes(self.unused_spot)
-        as_bytes(self.spots)[slots, :width] = compacted
+        self.spot_bytes[slots, :width] = compacted
         self.spot_count[slots] = count
 
     # ---------------------------------------------------------------------------------------------- draw
@@ -1049,7 +1059,7 @@ class SearingSpotlightsCore(BatchedCore):
         docstring)."""
         if spots is None:
             width = int(self.spot_count[idx].max(initial=0))
-            records = as_bytes(self.spots)[idx, :width].view(SPOTS)
+            records = self.spot_bytes[idx, :width].view(SPOTS)
             spots = records["centre"], records["base"], records["drawn"]
         frames = out[:-1]
         self._hole_masks(frames, *spots)
@@ -1120,16 +1130,13 @@ class SearingSpotlightsCore(BatchedCore):
             rows[keys_now] = union
 
     def _under_keys(self, idx: Index, red: np.ndarray | int) -> np.ndarray:
-        """What the picture under the darkness shows, as one number per slot: agent sprite id + 1 (0: none), its
-        centre y and x, red floor."""
-        key = self.heading[idx] * (self.t[idx] > 0)  # the reset frame shows the agent facing up
-        key += self.agent_sprite0[idx] + 1
-        key *= self.agent_hidden[idx]
-        key <<= 7
-        key += self.y[idx]
-        key <<= 7
-        key += self.x[idx]
-        key <<= 1
+        """What the picture under the darkness shows, as one number per slot: (hidden agent's sprite id + 1) << 15,
+        its centre y << 8 and x << 1, red floor."""
+        key = np.minimum(self.t[idx], 1)  # the reset frame shows the agent facing up
+        key *= self.heading[idx]
+        key *= self.heading_key[idx]
+        key += self.agent_key[idx]
+        key += self.pos[idx] @ UNDER_KEY_POSITION
         key += red
         return key
 
