@@ -1125,9 +1125,10 @@ class SearingSpotlightsCore(BatchedCore):
             else:
                 keys_now, codes_now = keys[layer], codes[layer]
                 keys, codes = keys[~layer], codes[~layer]
-            union = rows[keys_now]
-            union.view(np.uint32).reshape(keys_now.size, -1)[:] |= words.take(codes_now, axis=0)
-            rows[keys_now] = union
+            union = rows.take(keys_now)
+            union_words = union.view(np.uint32).reshape(keys_now.size, -1)
+            np.bitwise_or(union_words, words.take(codes_now, axis=0), out=union_words)
+            rows.put(keys_now, union)
 
     def _under_keys(self, idx: Index, red: np.ndarray | int) -> np.ndarray:
         """What the picture under the darkness shows, as one number per slot: (hidden agent's sprite id + 1) << 15,
