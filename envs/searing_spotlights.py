@@ -185,9 +185,6 @@ def span_code(lo: np.ndarray | int, hi: np.ndarray | int) -> np.ndarray | int:
     return lo * (2 * SCREEN - 1 - lo) // 2 + hi + 1
 
 
-SPAN_CODES = span_code(SCREEN - 1, SCREEN - 1) + 1
-
-
 @cache
 def span_rows() -> np.ndarray:
     """One 0/255 row of 252 bytes per span code: 255 on the three channels of the pixels lo..hi."""
