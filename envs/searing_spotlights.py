@@ -247,18 +247,15 @@ def hole_tables(max_radius: int) -> HoleTables:
 
 
 # ------------------------------------------------------------------------------------------------ blending
-def darken(rows: np.ndarray, alpha: np.ndarray, holes: np.ndarray | None = None) -> np.ndarray:
+def darken(rows: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16).
 
-    ``holes`` (0/255 bytes like ``rows``) keeps the bytes where it is 255: the lit picture inside the spotlights.
     Every pass has one dtype: numpy's mixed-dtype loops are buffered and several times slower.
     """
     product = rows.astype(np.uint16)
     product *= np.asarray(alpha, np.uint16)
     product //= 255  # (numpy divides by a constant without a division per element)
     share = product.astype(np.uint8)
-    if holes is not None:
-        share &= ~holes
     return np.subtract(rows, share, out=share)
 
 
@@ -1060,12 +1057,10 @@ class SearingSpotlightsCore(BatchedCore):
             spots = records["centre"], records["base"], records["drawn"]
         frames = out[:-1]
         self._hole_masks(frames, *spots)
+        np.bitwise_and(frames, self.under if isinstance(idx, slice) else self.under[idx], out=frames)
         blend = (self.t[idx] < self.blend_until[idx]).nonzero()[0]
-        holes = frames[blend] if blend.size else None  # (a copy) the blended frames need their holes
-        full = isinstance(idx, slice)
-        np.bitwise_and(frames, self.under if full else self.under[idx], out=frames)
         if blend.size:
-            self._blend_slots(self.all_slots[idx][blend], blend, holes, frames)
+            self._blend_slots(self.all_slots[idx][blend], blend, frames)
         self._finish_frames(idx, out)
 
     def _paint_red(self, idx: Index, slots: np.ndarray, hud_code: np.ndarray) -> None:
@@ -1261,15 +1256,18 @@ class SearingSpotlightsCore(BatchedCore):
             for name in self.orders[k][self._coin_above(k)][1]:
                 self._paste_entity(out, i, k, name)
 
-    def _blend_slots(self, slots: np.ndarray, local: np.ndarray, holes: np.ndarray, out: np.ndarray) -> None:
+    def _blend_slots(self, slots: np.ndarray, local: np.ndarray, out: np.ndarray) -> None:
         """Frames with a partly transparent darkness or with spotlight rings: lit in the holes, blended elsewhere.
 
-        ``slots`` are slot numbers, ``holes`` their 0/255 hole masks and ``local`` their frames in ``out``.
+        ``slots`` are slot numbers and ``local`` their frames in ``out``, which hold ``under & hole_mask`` (the lit
+        picture in the holes, 0 elsewhere): the blended frame is the bytewise maximum of that and the darkened
+        picture, which is nowhere brighter than the lit one.
         """
         lit = self.under[slots]
         alpha = self.alpha(slots)
         if np.count_nonzero(alpha):
-            blended = darken(lit, alpha[:, None, None], holes)  # the lit picture in the holes, darkened elsewhere
+            blended = darken(lit, alpha[:, None, None])
+            np.maximum(blended, out[local], out=blended)
             for i in self.rings[slots].nonzero()[0].tolist():
                 self._draw_rings(int(slots[i]), blended[i], lit[i])
             lit = blended
@@ -1360,7 +1358,7 @@ class SearingSpotlightsCore(BatchedCore):
             pixels[top : top + disc.shape[0], left : left + disc.shape[1]] |= disc
         holes = np.repeat(pixels[margin:-margin, margin:-margin], 3, axis=1).astype(np.uint8) * 255
         frames = np.zeros((2, SCREEN, ROW_BYTES), np.uint8)  # the picture and a scratch frame
-        frames[0] = darken(floor, np.array(self.alpha(k)), holes)
+        frames[0] = np.maximum(darken(floor, np.array(self.alpha(k))), floor & holes)
         if self.rings[k]:
             self._draw_rings(k, frames[0], floor)
         for name in ("coins", "agent") if self.endless else ("exit", "coins", "agent"):
