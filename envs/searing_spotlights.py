@@ -1110,13 +1110,13 @@ class SearingSpotlightsCore(BatchedCore):
         while keys.size:
             position = np.arange(keys.size)
             claim[keys] = position  # the last span of each row claims it for this layer
-            layer = claim[keys] == position
-            if layer.all():
+            later = claim[keys] != position  # spans left for a later layer
+            if np.count_nonzero(later):
+                keys_now, codes_now = keys[~later], codes[~later]
+                keys, codes = keys[later], codes[later]
+            else:
                 keys_now, codes_now = keys, codes
                 keys = keys[:0]
-            else:
-                keys_now, codes_now = keys[layer], codes[layer]
-                keys, codes = keys[~layer], codes[~layer]
             union = rows.take(keys_now)
             union_words = union.view(np.uint32).reshape(keys_now.size, -1)
             np.bitwise_or(union_words, words.take(codes_now, axis=0), out=union_words)
