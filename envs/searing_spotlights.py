@@ -559,7 +559,6 @@ class SearingSpotlightsCore(BatchedCore):
         self._defaults = self.resolve(None)  # (cross-checks the constructor options) shared by default resets
         n = self.num_envs
         self.all_slots = np.arange(n)
-        self.row_base = self.all_slots[:, None, None] * SCREEN  # first frame row of each slot
         self.settings = np.zeros(n, SETTINGS)
         self.settings_bytes = as_bytes(self.settings)
         for name in SETTINGS.names:  # attribute views of the settings columns
