@@ -5,9 +5,8 @@ generation makes dozens of small bounded draws (``rng.integers(0, n)``, ``rng.ch
 spends microseconds on each call whatever its size. :class:`BoundedDraws` makes the same draws from 32-bit words
 fetched in bulk and leaves the generator in exactly the state the one-by-one calls would have left it, so later
 draws (the next level, the next episode of a continuing generator) stay identical to the reference's.
-:class:`StreamDraws` does the same on whole 64-bit outputs, for levels that mix bounded ints with doubles
-(``rng.uniform``), which take a whole output and leave a kept half word alone; BoundedDraws' flat list of 32-bit
-words, which the hot loops of Mortar Mayhem and Mystery Path read directly, cannot express that.
+:class:`DirectDraws` serves levels that mix bounded ints with doubles (``rng.uniform``) and make only a few draws
+at a time: it calls the bit generator's C functions directly, the ones numpy's calls end in.
 """
 
 from __future__ import annotations
@@ -27,31 +26,42 @@ _capsule_pointer = ctypes.pythonapi.PyCapsule_GetPointer
 _capsule_pointer.restype, _capsule_pointer.argtypes = ctypes.c_void_p, [ctypes.py_object, ctypes.c_char_p]
 
 
-def _next_uint32_function() -> ctypes._CFuncPtr | None:
-    """PCG64's C ``next_uint32`` (the function behind every 32-bit draw, with the leftover-half buffer), called on a
-    generator's state through the ``bitgen_t`` struct of its capsule (numpy's public C API). None if that struct
-    does not hold the function numpy's own ctypes interface reports."""
+_UINT32_FUNCTION = ctypes.CFUNCTYPE(ctypes.c_uint32, ctypes.c_void_p)
+_DOUBLE_FUNCTION = ctypes.CFUNCTYPE(ctypes.c_double, ctypes.c_void_p)
+_bitgen_cache: dict[type, tuple[Any, Any]] = {}  # per bit generator class (its C functions are static)
+
+
+def _bitgen_functions(bit_generator: np.random.BitGenerator) -> tuple[int, Any, Any]:
+    """The state address and the C ``next_uint32`` and ``next_double`` of a bit generator, read from its
+    ``bitgen_t`` struct (state, next_uint64, next_uint32, next_double, ...); the functions are checked once per
+    class against numpy's ctypes interface. None for the functions if the struct is not as expected."""
+    functions = _bitgen_cache.get(type(bit_generator))
+    if functions is None:
+        functions = _bitgen_cache[type(bit_generator)] = _checked_functions(bit_generator)
+    if functions[0] is None:
+        return 0, None, None
+    return ctypes.c_void_p.from_address(_capsule_pointer(bit_generator.capsule, b"BitGenerator")).value, *functions
+
+
+def _checked_functions(bit_generator: np.random.BitGenerator) -> tuple[Any, Any]:
     try:
-        probe = np.random.PCG64(0)
-        bitgen = _capsule_pointer(probe.capsule, b"BitGenerator")
-        address = ctypes.c_void_p.from_address(bitgen + 2 * ctypes.sizeof(ctypes.c_void_p)).value  # 3rd field
-        if address != ctypes.cast(probe.ctypes.next_uint32, ctypes.c_void_p).value:
-            return None
-        return ctypes.CFUNCTYPE(ctypes.c_uint32, ctypes.c_void_p)(address)
+        bitgen = (ctypes.c_void_p * 4).from_address(_capsule_pointer(bit_generator.capsule, b"BitGenerator"))
+        interface = bit_generator.ctypes
+        expected = [ctypes.cast(f, ctypes.c_void_p).value for f in (interface.next_uint32, interface.next_double)]
     except (AttributeError, TypeError, ValueError):
-        return None
-
-
-_NEXT_UINT32 = _next_uint32_function()
+        return None, None
+    if bitgen[0] != interface.state_address or [bitgen[2], bitgen[3]] != expected:
+        return None, None
+    return _UINT32_FUNCTION(bitgen[2]), _DOUBLE_FUNCTION(bitgen[3])
 
 
 def next_word(rng: np.random.Generator) -> int:
     """``int(rng.integers(0, 2**32, dtype=np.uint32))`` (a leftover half first, else the low half of a fresh
-    output, keeping its high half), calling numpy's C function directly: a third of numpy's Python-level cost."""
-    if _NEXT_UINT32 is None:
+    output, keeping its high half), calling the bit generator's C function directly: a third of numpy's cost."""
+    state, next_uint32, _ = _bitgen_functions(rng.bit_generator)
+    if next_uint32 is None:
         return int(rng.integers(0, _WORD, dtype=np.uint32))
-    bitgen = _capsule_pointer(rng.bit_generator.capsule, b"BitGenerator")
-    return _NEXT_UINT32(ctypes.c_void_p.from_address(bitgen).value)  # the struct's first field: the state
+    return next_uint32(state)
 
 
 def seeded_generator(seed: int) -> np.random.Generator:
@@ -314,58 +324,43 @@ class BoundedDraws:
             _rewind(self.bit_generator, self.saved, 0, bool(buffered and not read), self.saved["uinteger"])
 
 
-class StreamDraws:
-    """``rng.integers(low, high)`` and ``rng.uniform(low, high)`` values, in any order, from 64-bit outputs read
-    ahead in bulk; :meth:`close` leaves the generator exactly where the one-by-one calls would have.
+class DirectDraws:
+    """``rng.integers(low, high)`` and ``rng.uniform(low, high)`` values, exactly numpy's, in any order, at a
+    fraction of numpy's per-call cost: the bit generator's own C functions (``next_uint32``, ``next_double`` of
+    numpy's public ``bitgen_t`` interface, the functions numpy's bounded ints and doubles call) are called directly,
+    so the generator's state, including a kept half word, evolves exactly as under numpy's calls and nothing has
+    to be read, saved or rewound.
 
-    Why it is exact: numpy draws a bounded int (range up to 2**32) with Lemire's method on 32-bit words, and PCG64
-    hands out the low, then the high half of each 64-bit output, keeping an unused high half in its state
-    (``has_uint32``/``uinteger``). A double is the top 53 bits of the next whole output and leaves a kept half alone.
-    A level makes ~25 such draws: one read-ahead and one rewind replace ~25 numpy calls of a few microseconds.
+    Why it is exact: numpy draws a bounded int (range up to 2**32) with Lemire's method on ``next_uint32`` words,
+    redrawing a biased word, and a double in [0, 1) with ``next_double``; ``uniform`` is ``low + (high - low) *
+    double``. Without the C functions (``bitgen_t`` not as expected) the draws go through numpy itself.
     """
 
-    BLOCK = 32  # outputs per read-ahead (a default level uses ~20)
-
-    __slots__ = ("bit_generator", "saved", "outputs", "used", "half", "has_half")
+    __slots__ = ("rng", "state", "next_uint32", "next_double")
 
     def __init__(self, rng: np.random.Generator) -> None:
-        self.bit_generator = _pcg64(rng, "StreamDraws")
-        self.saved = self.bit_generator.state
-        # numpy's kept high half (``uinteger``, stale once used) and whether it is still to be used (``has_uint32``)
-        self.half, self.has_half = self.saved["uinteger"], bool(self.saved["has_uint32"])
-        self.outputs: list[int] = self.bit_generator.random_raw(self.BLOCK).tolist()
-        self.used = 0  # outputs taken
-
-    def _output(self) -> int:
-        if self.used == len(self.outputs):
-            self.outputs += self.bit_generator.random_raw(self.BLOCK).tolist()
-        self.used += 1
-        return self.outputs[self.used - 1]
+        self.rng = rng  # (keeps the bit generator, and so its state, alive)
+        self.state, self.next_uint32, self.next_double = _bitgen_functions(rng.bit_generator)
 
     def integers(self, low: float, high: float) -> int:
         """The value of ``rng.integers(low, high)`` (float bounds are truncated, as numpy does)."""
         low, span = int(low), int(high) - int(low)
-        if not 1 <= span <= 1 << 32:
+        if not 1 <= span <= _WORD:
             raise ValueError(f"integers({low}, {high}): expected 1 <= high - low <= 2**32")
         if span == 1:
             return low  # numpy draws nothing when there is only one choice
+        if self.next_uint32 is None:
+            return int(self.rng.integers(low, low + span))
         while True:
-            if self.has_half:
-                word, self.has_half = self.half, False
-            else:
-                word = self._output()
-                self.half, self.has_half, word = word >> 32, True, word & 0xFFFFFFFF
-            product = word * span
+            product = self.next_uint32(self.state) * span
             low_bits = product & 0xFFFFFFFF
             # Lemire: a low part below (2**32 - span) % span would bias the result, so numpy draws again
-            if low_bits >= span or low_bits >= ((1 << 32) - span) % span:
+            if low_bits >= span or low_bits >= (_WORD - span) % span:
                 return low + (product >> 32)
 
     def uniform(self, low: float, high: float) -> float:
-        """The value of ``rng.uniform(low, high)``: ``low + (high - low) * next_double``."""
+        """The value of ``rng.uniform(low, high)``."""
         low, high = float(low), float(high)
-        return low + (high - low) * ((self._output() >> 11) * (1.0 / 9007199254740992.0))
-
-    def close(self) -> None:
-        """Rewind the generator to just after the outputs taken, keeping an unused half as numpy would."""
-        _rewind(self.bit_generator, self.saved, self.used, self.has_half, self.half)
+        if self.next_double is None:
+            return float(self.rng.uniform(low, high))
+        return low + (high - low) * self.next_double(self.state)

@@ -50,7 +50,7 @@ from envs.core import BatchedCore, Index
 from envs.drawing import KEY_BLUE, Sprite, SpriteScatter, agent_sprites, disc_mask, pygame, surface_to_sprite
 from envs.movement import continuous_heading, continuous_velocity
 from envs.options import Option
-from envs.rng import StreamDraws
+from envs.rng import DirectDraws
 
 SCREEN = 84
 ROW_BYTES = SCREEN * 3
@@ -340,7 +340,7 @@ def block_position(mask: np.ndarray, x: int, y: int, radius: int) -> None:
 
 
 def sample_position(
-    mask: np.ndarray, rng: np.random.Generator | StreamDraws, radius: int, empty: bool = False
+    mask: np.ndarray, rng: np.random.Generator | DirectDraws, radius: int, empty: bool = False
 ) -> tuple[int, int]:
     """A uniformly drawn free pixel (row-major order of the free ones), which is then blocked with ``radius``.
 
@@ -522,21 +522,24 @@ EXIT_BIT, OPEN_EXIT_BIT = 1 << 14, 1 << 15
 
 
 @cache
-def touch_disc(reach: float) -> np.ndarray:
-    """Offsets (-r..r in y and x) whose distance is at most ``reach``, computed like pygame's distance_to."""
+def touch_stamp(reach: float, bit: int) -> np.ndarray:
+    """``bit`` on the offsets (-r..r in y and x) whose distance is at most ``reach``, computed like pygame's
+    distance_to; 0 elsewhere."""
     r = int(math.floor(reach))
     offsets = np.arange(-r, r + 1)
-    return np.sqrt(offsets[None, :] ** 2 + offsets[:, None] ** 2) <= reach
+    stamp = np.where(np.sqrt(offsets[None, :] ** 2 + offsets[:, None] ** 2) <= reach, bit, 0).astype(np.uint16)
+    stamp.setflags(write=False)
+    return stamp
 
 
 def mark_touch(item_map: np.ndarray, x: int, y: int, reach: float, bit: int) -> None:
     """Set ``bit`` in the (84, 84) [y, x] map wherever an agent centre is within ``reach`` of (x, y)."""
-    disc = touch_disc(float(reach))
-    r = disc.shape[0] // 2
+    stamp = touch_stamp(float(reach), bit)
+    r = stamp.shape[0] // 2
     top, left = y - r, x - r
     r0, c0 = max(top, 0), max(left, 0)
-    r1, c1 = min(top + disc.shape[0], SCREEN), min(left + disc.shape[1], SCREEN)
-    item_map[r0:r1, c0:c1] |= disc[r0 - top : r1 - top, c0 - left : c1 - left].astype(np.uint16) * np.uint16(bit)
+    r1, c1 = min(top + stamp.shape[0], SCREEN), min(left + stamp.shape[1], SCREEN)
+    item_map[r0:r1, c0:c1] |= stamp[r0 - top : r1 - top, c0 - left : c1 - left]
 
 
 class SearingSpotlightsCore(BatchedCore):
@@ -719,7 +722,7 @@ class SearingSpotlightsCore(BatchedCore):
             self.unused_row_bytes = as_bytes(self.unused_row)
             self.spots["base"] = self.tables.base(self.spots["radius"])
 
-    def _new_spot(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> tuple:
+    def _new_spot(self, k: int, draws: DirectDraws, opts: dict[str, Any]) -> tuple:
         """A spotlight record: radius, speed, then the three angles (the reference's 5 draws, in its order)."""
         radius = draws.integers(opts["spot_min_radius"], opts["spot_max_radius"] + 1)
         speed = draws.uniform(opts["spot_min_speed"], opts["spot_max_speed"])
@@ -735,9 +738,7 @@ class SearingSpotlightsCore(BatchedCore):
         j = int(self.spot_count[k])
         if j == self.spots.shape[1]:
             self._grow_spots(2 * j)
-        draws = StreamDraws(self.rngs[k])
-        self.spots[k, j] = self._new_spot(k, draws, self.slot_options[k])
-        draws.close()
+        self.spots[k, j] = self._new_spot(k, DirectDraws(self.rngs[k]), self.slot_options[k])
         self.spot_count[k] = j + 1
         self.drawn_is_listed = False
 
@@ -746,51 +747,49 @@ class SearingSpotlightsCore(BatchedCore):
         """New episodes with the same options: per-slot draws in the reference's order, the rest for all at once."""
         record, orders, start, record_bytes, start_bytes = self._episode_settings(opts)
         idx = np.array(slots, dtype=np.int64)
-        self.settings_bytes[idx] = record_bytes
-        self.episode_bytes[idx] = start_bytes
+        # (most resets are of one slot: a slice then selects it without the cost of fancy indexing)
+        sel = slice(slots[0], slots[0] + 1) if len(slots) == 1 else idx
+        self.settings_bytes[sel] = record_bytes
+        self.episode_bytes[sel] = start_bytes
         for k in slots:
             self.orders[k] = orders
         self._use_tables(int(opts["spot_max_radius"]))
         count = opts["initial_spawns"]
         if count > self.spots.shape[1]:
             self._grow_spots(max(count, 2 * self.spots.shape[1]))
-        self.spot_bytes[idx, count:] = self.unused_row_bytes[count:]
+        self.spot_bytes[sel, count:] = self.unused_row_bytes[count:]
         self.drawn_is_listed = False
-        self.item_map[idx] = 0
+        self.item_map[sel] = 0
         if not self.endless:
             most = max(opts["num_coins"], default=0)
             if most > self.coin_x.shape[1]:
                 grow = ((0, 0), (0, most - self.coin_x.shape[1]))
                 self.coin_x, self.coin_y = np.pad(self.coin_x, grow), np.pad(self.coin_y, grow)
                 self.coin_alive = np.pad(self.coin_alive, grow)
-            self.coin_alive[idx] = False
+            self.coin_alive[sel] = False
         for k, rng in zip(slots, rngs, strict=True):
-            draws = StreamDraws(rng)
-            self._draw_level(k, draws, opts)
-            draws.close()
-        self.hud[idx] = reset_hud_row(
+            self._draw_level(k, DirectDraws(rng), opts)
+        self.hud[sel] = reset_hud_row(
             self.endless, bool(opts["show_last_action"]), bool(opts["show_last_positive_reward"])
         )
         for k in slots:
             self._build_lit(k)
-        # under the darkness: the blue lit picture with the hidden agent (facing up) on top
-        key = self._under_keys(idx, 0)
-        self.under_key[idx] = key
-        self.under[idx] = self.lit[0, idx]
-        hidden = key >> 15 > 0
-        if np.count_nonzero(hidden):
-            paste = idx[hidden]
-            self._paste_agents(self.under_buffer, paste, (key[hidden] >> 15) - 1, self.x[paste], self.y[paste])
+        # under the darkness: the blue lit picture with the hidden agent (facing up) on top (see ``_under_keys``)
+        key = self.agent_key[sel] + self.pos[sel] @ UNDER_KEY_POSITION
+        self.under_key[sel] = key
+        self.under[sel] = self.lit[0, sel]
+        if record["agent_hidden"]:
+            self._paste_agents(self.under_buffer, idx, (key >> 15) - 1, self.x[sel], self.y[sel])
         # the reset frames: no holes yet, so the darkness (alpha 0 when the light dims) covers everything
         out = np.empty((len(slots) + 1, SCREEN, ROW_BYTES), np.uint8)  # the frames and a scratch frame
         alpha = int(record["alphas"][0])
-        out[:-1] = darken(self.under[idx], np.array(alpha)) if alpha else self.under[idx]
-        self._finish_frames(idx, out)
+        out[:-1] = darken(self.under[sel], np.array(alpha)) if alpha else self.under[sel]
+        self._finish_frames(sel, out)
         self._frames_to_write()
-        self.frames[idx] = out[:-1]
-        self.stale[idx] = False
+        self.frames[sel] = out[:-1]
+        self.stale[sel] = False
 
-    def _draw_level(self, k: int, draws: StreamDraws, opts: dict[str, Any]) -> None:
+    def _draw_level(self, k: int, draws: DirectDraws, opts: dict[str, Any]) -> None:
         """Slot k's agent, first spotlights, coins and exit, with the reference's draws in its order."""
         mask = np.zeros((SCREEN, SCREEN), bool)
         self.heading[k] = draws.integers(0, 8)  # heading index (x 45 degrees): what rng.choice draws
@@ -831,7 +830,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.coin_alive[k, j] = True
         mark_touch(self.item_map[k], x, y, int(self.coin_reach[k]), 1 << j)
 
-    def _spawn_endless_coin(self, k: int, draws: StreamDraws, previous: tuple[int, int] | None) -> None:
+    def _spawn_endless_coin(self, k: int, draws: DirectDraws, previous: tuple[int, int] | None) -> None:
         """A new coin: the sampler is cleared, the old coin's place blocked, then a draw (the reference's order)."""
         mask = np.zeros((SCREEN, SCREEN), bool)
         if previous is not None:
@@ -920,9 +919,7 @@ class SearingSpotlightsCore(BatchedCore):
                 self.end_t_now[k] = min(int(self.end_t[k]), NEVER if per_coin == NEVER else zero_t + per_coin)
                 terminated[i] = self.t[k] == self.end_t_now[k]
                 previous = (int(self.coin_x[k, 0]), int(self.coin_y[k, 0]))
-                draws = StreamDraws(self.rngs[k])
-                self._spawn_endless_coin(k, draws, previous)
-                draws.close()
+                self._spawn_endless_coin(k, DirectDraws(self.rngs[k]), previous)
                 self._build_lit(k)
                 continue
             coin_reward = 0.0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from envs import rng as rng_module
-from envs.rng import BoundedDraws, next_word, seeded_generator, seeded_generators
+from envs.rng import BoundedDraws, DirectDraws, next_word, seeded_generator, seeded_generators
 
 
 def live_state(rng: np.random.Generator) -> dict:
@@ -118,7 +118,7 @@ def test_only_pcg64_streams_are_reproduced() -> None:
 
 @pytest.mark.parametrize("leftover", [False, True])
 def test_next_word_equals_numpy_32_bit_draws(leftover: bool) -> None:
-    assert rng_module._NEXT_UINT32 is not None  # numpy's bitgen_t struct was found: the C path is the one tested
+    assert rng_module._bitgen_functions(np.random.PCG64(0))[1] is not None  # the C path is the one tested
     for seed in range(50):
         ours, theirs = seeded_generator(seed), seeded_generator(seed)
         if leftover:
@@ -153,3 +153,42 @@ def test_batch_seeded_generators_keep_the_seed_sequence_uses() -> None:
     for clone in (pickle.loads(pickle.dumps(rng)), copy.deepcopy(rng)):
         assert type(clone.bit_generator.seed_seq) is np.random.SeedSequence
         assert clone.integers(0, 2**63, 4).tolist() == seeded_generator(5).integers(0, 2**63, 4).tolist()
+
+
+@pytest.mark.parametrize("bit_generator", [np.random.PCG64, np.random.Philox, np.random.MT19937])
+def test_direct_draws_equal_numpy_draws_and_leave_the_same_generator_state(bit_generator: type) -> None:
+    """Bounded ints (with Lemire rejections, float bounds, the full 2**32 range), doubles around a kept half word,
+    draws on a generator that holds a kept half when the draws start: values and the generator state."""
+    assert rng_module._bitgen_functions(bit_generator(0))[2] is not None  # the C path is the one tested
+    rng, twin = np.random.Generator(bit_generator(11)), np.random.Generator(bit_generator(11))
+    spans = [(0, 360), (-45, 45), (7.5, 14.75), (0, 1), (5, 6), (0, 3 << 30), (0, 1 << 32), (2, 4), (0, 7056)]
+    for round_ in range(60):
+        draws = DirectDraws(rng)
+        for i in range(round_ % 7 * 11):
+            if (i + round_) % 3:  # 32-bit draws leave a half word kept every other time; a double must not touch it
+                low, high = spans[(i * 5 + round_) % len(spans)]
+                assert draws.integers(low, high) == twin.integers(low, high)
+            else:
+                low, high = (0.0025, 0.0075) if i % 2 else (0, 1)
+                assert draws.uniform(low, high) == twin.uniform(low, high)
+        if bit_generator is np.random.PCG64:
+            assert live_state(rng) == live_state(twin)
+        if round_ % 2:  # leave a kept half (or take it) through numpy itself
+            assert rng.integers(0, 10) == twin.integers(0, 10)
+    words = [generator.integers(0, 2**32, size=5, dtype=np.uint32).tolist() for generator in (rng, twin)]
+    assert words[0] == words[1] and rng.random() == twin.random()  # the same state after all rounds
+    with pytest.raises(ValueError, match="high - low"):
+        DirectDraws(rng).integers(3, 3)
+
+
+def test_direct_draws_fall_back_to_numpy_without_the_c_functions(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(rng_module, "_bitgen_functions", lambda bit_generator: (0, None, None))
+    rng, twin = seeded_generator(3), seeded_generator(3)
+    draws = DirectDraws(rng)
+    assert [draws.integers(0, 360), draws.uniform(0.5, 2.0), draws.integers(7.5, 14.75)] == [
+        twin.integers(0, 360),
+        twin.uniform(0.5, 2.0),
+        twin.integers(7.5, 14.75),
+    ]
+    assert next_word(rng) == int(twin.integers(0, 2**32, dtype=np.uint32))
+    assert live_state(rng) == live_state(twin)

@@ -8,7 +8,7 @@ import pytest
 
 import envs
 from envs.core import seeded_generator
-from envs.rng import StreamDraws
+from envs.rng import DirectDraws
 from envs.searing_spotlights import (
     ACTION_COLOURS,
     GREEN,
@@ -111,9 +111,7 @@ def test_spotlight_creation_makes_the_five_draws_in_the_reference_order() -> Non
     core = envs.make_core("SearingSpotlights-v0")
     opts = core.resolve(None)
     rng, twin = seeded_generator(5), seeded_generator(5)
-    draws = StreamDraws(rng)
-    record = core._new_spot(0, draws, opts)
-    draws.close()
+    record = core._new_spot(0, DirectDraws(rng), opts)
     radius = twin.integers(7.5, 14.75)  # float bounds are truncated: an int in 7..13
     speed = twin.uniform(0.0025, 0.0075)
     start = twin.integers(0, 360)
@@ -129,31 +127,11 @@ def test_spotlight_creation_makes_the_five_draws_in_the_reference_order() -> Non
         assert abs(point - expected) < 1e-9  # angles grow clockwise on screen, around the screen centre
 
 
-def test_stream_draws_equal_numpy_draws_and_leave_the_same_generator_state() -> None:
-    """Bounded ints (with Lemire rejections), doubles around a kept half word, several read-aheads per stream, and
-    streams opened on a generator with and without a kept half: values and the generator state after close()."""
-    rng, twin = seeded_generator(11), seeded_generator(11)
-    spans = [(0, 360), (-45, 45), (7.5, 14.75), (0, 1), (5, 6), (0, 3 << 30), (0, 1 << 32), (2, 4), (0, 7056)]
-    for round_ in range(60):
-        draws = StreamDraws(rng)
-        for i in range(round_ % 7 * 11):  # up to 66 draws: past the first read-ahead
-            if (i + round_) % 3:  # 32-bit draws leave a half word kept every other time; a double must not touch it
-                low, high = spans[(i * 5 + round_) % len(spans)]
-                assert draws.integers(low, high) == twin.integers(low, high)
-            else:
-                low, high = (0.0025, 0.0075) if i % 2 else (0, 1)
-                assert draws.uniform(low, high) == twin.uniform(low, high)
-        draws.close()
-        assert rng.bit_generator.state == twin.bit_generator.state
-        if round_ % 2:  # leave a kept half (or take it) through numpy itself
-            assert rng.integers(0, 10) == twin.integers(0, 10)
-
-
 def test_radius_is_an_int_in_7_to_13() -> None:
     core = envs.make_core("SearingSpotlights-v0")
     opts = core.resolve(None)
     rng = seeded_generator(0)
-    draws = StreamDraws(rng)
+    draws = DirectDraws(rng)
     radii = {core._new_spot(0, draws, opts)[0] for _ in range(400)}
     assert radii == set(range(7, 14))
 
