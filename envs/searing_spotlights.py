@@ -233,7 +233,10 @@ class HoleTables:
                 self.codes[block, j] = np.where(visible, code, 0)
                 row = centres + j + offset
                 self.rows[block, j] = np.where((row >= HUD_ROWS) & (row < SCREEN), row, 0)
-        for table in (self.codes, self.rows):
+        # whether a table row has any visible span (a disc partly on the screen horizontally) or row (vertically)
+        self.columns_seen = self.codes.any(axis=1)
+        self.rows_seen = self.rows.any(axis=1)
+        for table in (self.codes, self.rows, self.columns_seen, self.rows_seen):
             table.setflags(write=False)
 
     def base(self, radius: np.ndarray | int) -> np.ndarray | int:
@@ -1080,8 +1083,18 @@ class SearingSpotlightsCore(BatchedCore):
         tables = self.tables
         local, j = np.nonzero(drawn)
         centre, base = centre[local, j], base[local, j]
-        codes = tables.codes.take(centre.real.astype(np.intp) + base, axis=0)  # (spotlights, disc rows)
-        keys = tables.rows.take(centre.imag.astype(np.intp) + base, axis=0)  # 0: not a visible row
+        at_x = centre.real.astype(np.intp)  # the table rows of the centres' x and y
+        at_x += base
+        at_y = centre.imag.astype(np.intp)
+        at_y += base
+        # spotlights wholly off the screen (about half of them: they start and end outside) are left out at once
+        seen = tables.columns_seen.take(at_x)
+        seen &= tables.rows_seen.take(at_y)
+        if np.count_nonzero(seen) < seen.size:
+            seen = seen.nonzero()[0]
+            local, at_x, at_y = local.take(seen), at_x.take(seen), at_y.take(seen)
+        codes = tables.codes.take(at_x, axis=0)  # (spotlights, disc rows)
+        keys = tables.rows.take(at_y, axis=0)  # 0: not a visible row
         visible = np.minimum(codes, 1)  # (0/1 in the tables' dtype: numpy's mixed-dtype loops are slower)
         visible *= np.minimum(keys, 1)
         codes *= visible
