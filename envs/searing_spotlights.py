@@ -233,10 +233,13 @@ class HoleTables:
                 self.codes[block, j] = np.where(visible, code, 0)
                 row = centres + j + offset
                 self.rows[block, j] = np.where((row >= HUD_ROWS) & (row < SCREEN), row, 0)
+        # 0/1 per entry: whether the span, the row is visible (multiplying by these is cheaper than comparisons)
+        self.codes_visible = np.minimum(self.codes, 1)
+        self.rows_visible = np.minimum(self.rows, 1)
         # whether a table row has any visible span (a disc partly on the screen horizontally) or row (vertically)
         self.columns_seen = self.codes.any(axis=1)
         self.rows_seen = self.rows.any(axis=1)
-        for table in (self.codes, self.rows, self.columns_seen, self.rows_seen):
+        for table in (self.codes, self.rows, self.codes_visible, self.rows_visible, self.columns_seen, self.rows_seen):
             table.setflags(write=False)
 
     def base(self, radius: np.ndarray | int) -> np.ndarray | int:
@@ -1093,12 +1096,11 @@ class SearingSpotlightsCore(BatchedCore):
         if np.count_nonzero(seen) < seen.size:
             seen = seen.nonzero()[0]
             local, at_x, at_y = local.take(seen), at_x.take(seen), at_y.take(seen)
-        codes = tables.codes.take(at_x, axis=0)  # (spotlights, disc rows)
-        keys = tables.rows.take(at_y, axis=0)  # 0: not a visible row
-        visible = np.minimum(codes, 1)  # (0/1 in the tables' dtype: numpy's mixed-dtype loops are slower)
-        visible *= np.minimum(keys, 1)
-        codes *= visible
-        keys *= visible  # empty spans go to row 0 (under the HUD), where they cannot collide
+        # (spotlights, disc rows): the span codes and screen rows, 0 unless the span is visible and on a visible row
+        codes = tables.codes.take(at_x, axis=0)
+        codes *= tables.rows_visible.take(at_y, axis=0)
+        keys = tables.rows.take(at_y, axis=0)
+        keys *= tables.codes_visible.take(at_x, axis=0)  # empty spans go to row 0 (under the HUD): no collisions
         keys = keys.astype(np.intp)  # (flat intp arrays: several times faster to scatter)
         keys += local[:, None] * SCREEN
         keys, codes = keys.ravel(), codes.ravel()

@@ -118,3 +118,17 @@ def test_scatter_refuses_frames_it_could_not_write_in_place() -> None:
     canvas = np.zeros((2, H + 4, W + 4, 3), np.uint8)
     with pytest.raises(ValueError, match="C-contiguous"):
         scatter.paste(canvas[:, 2:-2, 2:-2], np.array([0]), np.array([0]), np.array([1]), np.array([1]))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sprite_paste_copies_exactly_the_opaque_pixels_that_land_on_the_frame(seed: int) -> None:
+    rng = np.random.default_rng(50 + seed)
+    for sprite in random_sprites(rng) + agent_sprites(0.25):
+        for top, left in ((-2, -3), (H - 2, W - 3), (4, 5), (-sprite.height, 0), (1, W)):
+            frame = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+            expected = frame.copy()
+            for i, j in zip(*np.nonzero(sprite.mask), strict=True):  # pixel by pixel
+                if 0 <= top + i < H and 0 <= left + j < W:
+                    expected[top + i, left + j] = sprite.rgb[i, j]
+            sprite.paste(frame, top, left)
+            np.testing.assert_array_equal(frame, expected)
