@@ -253,7 +253,7 @@ def hole_tables(max_radius: int) -> HoleTables:
 
 
 # ------------------------------------------------------------------------------------------------ blending
-def darken(rows: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+def darken(rows: np.ndarray, alpha: np.ndarray | int) -> np.ndarray:
     """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16).
 
     Every pass has one dtype: numpy's mixed-dtype loops are buffered and several times slower.
@@ -1272,17 +1272,17 @@ class SearingSpotlightsCore(BatchedCore):
 
         ``slots`` are slot numbers and ``local`` their frames in ``out``, which hold ``under & hole_mask`` (the lit
         picture in the holes, 0 elsewhere): the blended frame is the bytewise maximum of that and the darkened
-        picture, which is nowhere brighter than the lit one.
+        picture, which is nowhere brighter than the lit one. Slot by slot, on views: the few slots blending in a
+        step (those in their first steps) cost less so than gathered into and scattered out of a batch.
         """
-        lit = self.under[slots]
-        alpha = self.alpha(slots)
-        if np.count_nonzero(alpha):
-            blended = darken(lit, alpha[:, None, None])
-            np.maximum(blended, out[local], out=blended)
-            for i in self.rings[slots].nonzero()[0].tolist():
-                self._draw_rings(int(slots[i]), blended[i], lit[i])
-            lit = blended
-        out[local] = lit
+        for i, k, alpha in zip(local.tolist(), slots.tolist(), self.alpha(slots).tolist(), strict=True):
+            under, frame = self.under[k], out[i]
+            if alpha:
+                np.maximum(frame, darken(under, alpha), out=frame)
+                if self.rings[k]:
+                    self._draw_rings(k, frame, under)
+            else:
+                frame[...] = under
 
     def _draw_rings(self, k: int, frame: np.ndarray, under: np.ndarray) -> None:
         """White 1-px outlines (black_background), blended over ``under`` (what lies beneath the darkness).
