@@ -28,12 +28,15 @@ AGENT_HAND = (50, 50, 50)  # the hand outline; its width int(3 * scale) is 0 at 
 class Sprite:
     """A small picture with a transparency mask, positioned by its top-left corner."""
 
-    __slots__ = ("rgb", "mask", "height", "width")
+    __slots__ = ("rgb", "mask", "height", "width", "mask3")
 
     def __init__(self, rgb: np.ndarray, mask: np.ndarray) -> None:
         self.rgb = np.ascontiguousarray(rgb, dtype=np.uint8)
         self.mask = np.ascontiguousarray(mask, dtype=bool)
         self.height, self.width = mask.shape
+        # the mask on every channel: a masked copy then runs along whole rows (a broadcast mask makes numpy step
+        # through the pixels three bytes at a time)
+        self.mask3 = np.repeat(self.mask[:, :, None], 3, axis=2)
 
     def paste(self, frame: np.ndarray, top: int, left: int, where: np.ndarray | None = None) -> None:
         """Copy the opaque pixels into ``frame`` (..., H, W, 3) with the sprite's top-left at (top, left), clipped.
@@ -46,11 +49,11 @@ class Sprite:
         r1, c1 = min(top + self.height, h), min(left + self.width, w)
         if r0 >= r1 or c0 >= c1:
             return
-        m = self.mask[r0 - top : r1 - top, c0 - left : c1 - left]
+        part = slice(r0 - top, r1 - top), slice(c0 - left, c1 - left)
+        m = self.mask3[part]
         if where is not None:
-            m = m & (where[r0:r1, c0:c1, 0] != 0)
-        rgb = self.rgb[r0 - top : r1 - top, c0 - left : c1 - left]
-        np.copyto(frame[..., r0:r1, c0:c1, :], rgb, where=m[:, :, None])
+            m = m & (where[r0:r1, c0:c1, :1] != 0)
+        np.copyto(frame[..., r0:r1, c0:c1, :], self.rgb[part], where=m)
 
 
 def surface_to_sprite(surface: pygame.Surface, key: tuple[int, int, int]) -> Sprite:
