@@ -457,7 +457,7 @@ SETTINGS = np.dtype(
         ("hud_flags27", np.int64),  # 27 * (4 * endless + 2 * show_last_action + show_last_positive_reward)
         ("hud_next", np.int64),  # hud_flags27 + 1: the base of the next step's HUD code
         ("agent_hidden", bool),
-        ("agent_key", np.int64),  # the hidden agent's part of the under key (see ``_under_keys``), facing up
+        ("agent_key", np.int64),  # the hidden agent's part of the under key (see ``_update_under``), facing up
         ("heading_key", np.int64),  # what a heading step adds to it
         ("any_visible", bool),  # some entity is drawn above the darkness
         ("coins_visible", bool),
@@ -780,7 +780,7 @@ class SearingSpotlightsCore(BatchedCore):
         )
         for k in slots:
             self._build_lit(k)
-        # under the darkness: the blue lit picture with the hidden agent (facing up) on top (see ``_under_keys``)
+        # under the darkness: the blue lit picture with the hidden agent (facing up) on top (see ``_update_under``)
         key = self.agent_key[sel] + self.pos[sel] @ UNDER_KEY_POSITION
         self.under_key[sel] = key
         self.under[sel] = self.lit[0, sel]
@@ -1133,47 +1133,46 @@ class SearingSpotlightsCore(BatchedCore):
             np.bitwise_or(union_words, words.take(codes_now, axis=0), out=union_words)
             rows.put(keys_now, union)
 
-    def _under_keys(self, idx: Index, red: np.ndarray | int) -> np.ndarray:
-        """What the picture under the darkness shows, as one number per slot: (hidden agent's sprite id + 1) << 15,
-        its centre y << 8 and x << 1, red floor."""
-        key = np.minimum(self.t[idx], 1)  # the reset frame shows the agent facing up
-        key *= self.heading[idx]
-        key *= self.heading_key[idx]
+    def _update_under(self, idx: Index, red: np.ndarray) -> None:
+        """Bring the stepped slots' pictures under the darkness up to date: the lit picture (red on hit steps with
+        visual feedback) with the hidden agent on top. A slot is rebuilt when its lit picture changed or the floor
+        colour flips; an agent that moved or turned is erased (its rows copied back from the lit picture) and
+        pasted again.
+
+        What a picture shows is one number per slot, its under key: (hidden agent's sprite id + 1) << 15, the
+        agent's centre y << 8 and x << 1, and the red floor bit (a reset frame's key has the agent facing up).
+        """
+        key = self.heading[idx] * self.heading_key[idx]
         key += self.agent_key[idx]
         key += self.pos[idx] @ UNDER_KEY_POSITION
         key += red
-        return key
-
-    def _update_under(self, idx: Index, red: np.ndarray) -> None:
-        """Bring the slots' pictures under the darkness up to date: the lit picture (red on hit steps with visual
-        feedback) with the hidden agent on top. A slot is rebuilt when its lit picture changed or the floor
-        colour flips; an agent that moved or turned is erased (its rows copied back from the lit picture) and
-        pasted again."""
-        key = self._under_keys(idx, red)
         old = self.under_key[idx]
         changed = (key != old).nonzero()[0]
         if not changed.size:
             return
-        slots, key, old, red = self.all_slots[idx][changed], key[changed], old[changed], red[changed]
+        slots, key, old = self.all_slots[idx][changed], key[changed], old[changed]
         self.under_key[slots] = key
-        ids = (key >> 15) - 1
-        n = self.num_envs
-        lit_rows, under_rows = self.lit.view(ROW).reshape(-1), self.under.view(ROW).reshape(-1)
-        source = red * n + slots  # the slots' lit pictures in ``lit`` seen as 2n pictures
-        rebuild = (old < 0) | ((old ^ key) & 1).astype(bool)
+        source = (key & 1) * self.num_envs + slots  # the slots' lit pictures in ``lit`` seen as 2n pictures
+        rebuild = (old ^ key | old >> 63) & 1  # the floor colour flipped, or the lit picture changed (key -1)
+        erase = (old >> 15) * (1 - rebuild)  # (an agent was drawn, no rebuild)
         if np.count_nonzero(rebuild):
+            rebuild = rebuild.nonzero()[0]
             self.under[slots[rebuild]] = self.lit.reshape(-1, SCREEN, ROW_BYTES)[source[rebuild]]
-        erase = (~rebuild & (old >> 15 > 0)).nonzero()[0]  # an agent was drawn: copy its rows back
-        if erase.size:
+        if np.count_nonzero(erase):  # copy its rows back
+            erase = erase.nonzero()[0]
             old_id = (old[erase] >> 15) - 1
             half = self.agent_sprites.heights[old_id] // 2
             top = (old[erase] >> 8 & 127) - half
             height = int(self.agent_sprites.heights[old_id].max())
             rows = np.minimum(np.maximum(top[:, None] + np.arange(height), 0), SCREEN - 1)
+            lit_rows, under_rows = self.lit.view(ROW).reshape(-1), self.under.view(ROW).reshape(-1)
             under_rows[slots[erase, None] * SCREEN + rows] = lit_rows[source[erase, None] * SCREEN + rows]
-        paste = (ids >= 0).nonzero()[0]
-        if paste.size:
-            self._paste_agents(self.under_buffer, slots[paste], ids[paste], self.x[slots[paste]], self.y[slots[paste]])
+        ids = (key >> 15) - 1
+        if np.count_nonzero(ids >= 0) < ids.size:
+            paste = (ids >= 0).nonzero()[0]
+            slots, ids = slots[paste], ids[paste]
+        if slots.size:
+            self._paste_agents(self.under_buffer, slots, ids, self.x[slots], self.y[slots])
 
     def _paste_agents(self, frames: np.ndarray, local: np.ndarray, ids: np.ndarray, x: np.ndarray, y: np.ndarray):
         """Paste agent sprites ``ids`` centred on (x, y) into ``frames[local]`` (a buffer ending with a spare frame)."""
