@@ -605,6 +605,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.under_key = np.full(n, -1, i64)  # what ``under`` shows (see ``_update_under``); -1: to rebuild
         self.span_index = np.zeros(n * SCREEN, np.int16)  # per frame row: the code of its span (see ``span_rows``)
         self.span_claim = np.zeros(n * SCREEN, np.intp)  # scratch for ``_or_lost_spans``
+        self.positions = np.arange(0)  # 0, 1, 2, ... for ``_or_lost_spans`` (grown on demand)
 
     # ------------------------------------------------------------------------------------------- options
     def resolve(self, options: dict[str, Any] | None) -> dict[str, Any]:
@@ -1118,20 +1119,24 @@ class SearingSpotlightsCore(BatchedCore):
         per row in each layer (a row crossed by several lost spans takes several layers, usually one or two)."""
         words = span_words()
         claim = self.span_claim
-        while keys.size:
-            position = np.arange(keys.size)
+        if self.positions.size < keys.size:
+            self.positions = np.arange(2 * keys.size)
+        while True:
+            position = self.positions[: keys.size]
             claim[keys] = position  # the last span of each row claims it for this layer
-            later = claim[keys] != position  # spans left for a later layer
-            if np.count_nonzero(later):
-                keys_now, codes_now = keys[~later], codes[~later]
+            now = claim[keys] == position
+            if np.count_nonzero(now) < keys.size:
+                keys_now, codes_now = keys[now], codes[now]
+                later = np.logical_not(now, out=now)  # spans left for a later layer
                 keys, codes = keys[later], codes[later]
             else:
-                keys_now, codes_now = keys, codes
-                keys = keys[:0]
+                keys_now, codes_now, keys = keys, codes, None
             union = rows.take(keys_now)
             union_words = union.view(np.uint32).reshape(keys_now.size, -1)
             np.bitwise_or(union_words, words.take(codes_now, axis=0), out=union_words)
             rows.put(keys_now, union)
+            if keys is None:
+                return
 
     def _update_under(self, idx: Index, red: np.ndarray) -> None:
         """Bring the stepped slots' pictures under the darkness up to date: the lit picture (red on hit steps with
