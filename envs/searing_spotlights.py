@@ -197,19 +197,16 @@ def span_rows() -> np.ndarray:
     return table
 
 
-@cache
-def span_words() -> np.ndarray:
-    """:func:`span_rows` as 63 words per row, for OR-ing."""
-    return span_rows().view(np.uint32)
-
-
 class HoleTables:
     """Per radius r and integer centre coordinate c, the rows of pygame's filled disc as flat table rows.
 
-    Row ``r * width + c - low`` of ``codes`` holds, for each disc row j (of 2 * max_radius), the span code of that
-    row for a centre column c (0 when the row is empty or off-screen); the same row of ``rows`` holds the screen row
+    Row ``r * width + c - low`` of ``codes`` holds, for each disc row j (of 2 * max_radius), the code of that row's
+    span for a centre column c (0 when the row is empty or off-screen); the same row of ``rows`` holds the screen row
     for a centre row c (0 when it is under the HUD or off-screen, row 0 is never a hole). Spotlight centres stay
     within ``SPOT_ORBIT + radius`` of the screen centre, so ``[low, low + width)`` covers every reachable one.
+
+    Codes index ``span_rows``, the 0/255 rows of only the spans that discs up to ``max_radius`` can make (950 of
+    the 3571 spans for radius 13: a 234 KB table, read at random rows every step, stays in the cache).
     """
 
     def __init__(self, max_radius: int) -> None:
@@ -233,6 +230,10 @@ class HoleTables:
                 self.codes[block, j] = np.where(visible, code, 0)
                 row = centres + j + offset
                 self.rows[block, j] = np.where((row >= HUD_ROWS) & (row < SCREEN), row, 0)
+        used = np.unique(self.codes)  # (0, the empty span, first)
+        self.codes = np.searchsorted(used, self.codes).astype(np.int16)
+        self.span_rows = span_rows()[used]
+        self.span_words = self.span_rows.view(np.uint32)  # 63 words per row, for OR-ing
         # 0/1 per entry: whether the span, the row is visible (multiplying by these is cheaper than comparisons)
         self.codes_visible = np.minimum(self.codes, 1)
         self.rows_visible = np.minimum(self.rows, 1)
@@ -241,6 +242,7 @@ class HoleTables:
         self.rows_seen = self.rows.any(axis=1)
         for table in (self.codes, self.rows, self.codes_visible, self.rows_visible, self.columns_seen, self.rows_seen):
             table.setflags(write=False)
+        self.span_rows.setflags(write=False)
 
     def base(self, radius: np.ndarray | int) -> np.ndarray | int:
         """Offset that turns a spotlight's integer centre coordinate into its table row."""
@@ -603,7 +605,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.under_buffer = np.zeros((n + 1, SCREEN, ROW_BYTES), np.uint8)  # the last frame is scratch
         self.under = self.under_buffer[:n]  # what lies under the darkness: lit (blue or red) + hidden agent
         self.under_key = np.full(n, -1, i64)  # what ``under`` shows (see ``_update_under``); -1: to rebuild
-        self.span_index = np.zeros(n * SCREEN, np.int16)  # per frame row: the code of its span (see ``span_rows``)
+        self.span_index = np.zeros(n * SCREEN, np.int16)  # per frame row: the code of its span (see HoleTables)
         self.span_claim = np.zeros(n * SCREEN, np.intp)  # scratch for ``_or_lost_spans``
         self.positions = np.arange(0)  # 0, 1, 2, ... for ``_or_lost_spans`` (grown on demand)
 
@@ -1109,7 +1111,7 @@ class SearingSpotlightsCore(BatchedCore):
         index.fill(0)
         index[keys] = codes
         rows = out.reshape(-1, ROW_BYTES)
-        span_rows().take(index, axis=0, out=rows, mode="clip")
+        tables.span_rows.take(index, axis=0, out=rows, mode="clip")
         lost = (index[keys] != codes).nonzero()[0]  # spans that lost their row to another one
         if lost.size:
             self._or_lost_spans(rows.view(ROW).reshape(-1), keys[lost], codes[lost])
@@ -1117,7 +1119,7 @@ class SearingSpotlightsCore(BatchedCore):
     def _or_lost_spans(self, rows: np.ndarray, keys: np.ndarray, codes: np.ndarray) -> None:
         """OR the spans ``codes`` into the frame ``rows`` (items of one row) ``keys``, a layer at a time: one span
         per row in each layer (a row crossed by several lost spans takes several layers, usually one or two)."""
-        words = span_words()
+        words = self.tables.span_words
         claim = self.span_claim
         if self.positions.size < keys.size:
             self.positions = np.arange(2 * keys.size)
