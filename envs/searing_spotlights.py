@@ -553,6 +553,8 @@ def mark_touch(item_map: np.ndarray, x: int, y: int, reach: float, bit: int) -> 
 class SearingSpotlightsCore(BatchedCore):
     """Both Searing Spotlights variants; ``endless=True`` gives ``Endless-SearingSpotlights-v0``."""
 
+    FEW_UNDER_UPDATES = 4  # up to this many changed pictures under the darkness are updated one by one
+
     base_render_fps = 25
     single_observation_space = gym.spaces.Box(0, 255, (SCREEN, SCREEN, 3), np.uint8)
     single_action_space = gym.spaces.MultiDiscrete([3, 3])
@@ -1157,6 +1159,9 @@ class SearingSpotlightsCore(BatchedCore):
         changed = (key != old).nonzero()[0]
         if not changed.size:
             return
+        if changed.size <= self.FEW_UNDER_UPDATES:
+            self._update_few_unders(self.all_slots[idx][changed].tolist(), key[changed].tolist(), old[changed].tolist())
+            return
         slots, key, old = self.all_slots[idx][changed], key[changed], old[changed]
         self.under_key[slots] = key
         source = (key & 1) * self.num_envs + slots  # the slots' lit pictures in ``lit`` seen as 2n pictures
@@ -1180,6 +1185,23 @@ class SearingSpotlightsCore(BatchedCore):
             slots, ids = slots[paste], ids[paste]
         if slots.size:
             self._paste_agents(self.under_buffer, slots, ids, self.x[slots], self.y[slots])
+
+    def _update_few_unders(self, slots: list[int], keys: list[int], olds: list[int]) -> None:
+        """``_update_under`` for a few changed slots (most steps of a batch with few moving agents), on views."""
+        heights, sprites = self.agent_sprites.heights, self.agent_sprites.sprites
+        for k, key, old in zip(slots, keys, olds, strict=True):
+            self.under_key[k] = key
+            lit, under = self.lit[key & 1, k], self.under[k]
+            if old < 0 or (old ^ key) & 1:  # the lit picture changed, or the floor colour flipped
+                under[...] = lit
+            elif old >> 15:  # erase the agent: copy its rows back
+                height = int(heights[(old >> 15) - 1])
+                top = (old >> 8 & 127) - height // 2
+                rows = slice(max(top, 0), max(top + height, 0))
+                under[rows] = lit[rows]
+            if key >> 15:
+                sprite_id = (key >> 15) - 1
+                paste_centred(sprites[sprite_id], under, key >> 1 & 127, key >> 8 & 127, int(heights[sprite_id]) // 2)
 
     def _paste_agents(self, frames: np.ndarray, local: np.ndarray, ids: np.ndarray, x: np.ndarray, y: np.ndarray):
         """Paste agent sprites ``ids`` centred on (x, y) into ``frames[local]`` (a buffer ending with a spare frame)."""
