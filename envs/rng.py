@@ -344,15 +344,17 @@ class DirectDraws:
 
     def integers(self, low: float, high: float) -> int:
         """The value of ``rng.integers(low, high)`` (float bounds are truncated, as numpy does)."""
-        low, span = int(low), int(high) - int(low)
-        if not 1 <= span <= _WORD:
+        low = int(low)
+        span = int(high) - low
+        if span <= 1 or span > _WORD:
+            if span == 1:
+                return low  # numpy draws nothing when there is only one choice
             raise ValueError(f"integers({low}, {high}): expected 1 <= high - low <= 2**32")
-        if span == 1:
-            return low  # numpy draws nothing when there is only one choice
-        if self.next_uint32 is None:
+        next_uint32 = self.next_uint32
+        if next_uint32 is None:
             return int(self.rng.integers(low, low + span))
         while True:
-            product = self.next_uint32(self.state) * span
+            product = next_uint32(self.state) * span
             low_bits = product & 0xFFFFFFFF
             # Lemire: a low part below (2**32 - span) % span would bias the result, so numpy draws again
             if low_bits >= span or low_bits >= (_WORD - span) % span:

@@ -317,17 +317,15 @@ def hud_tables() -> tuple[np.ndarray, np.ndarray]:
 
 # ------------------------------------------------------------------------------------------------ sampler
 @cache
-def orbit_points(radius: int) -> np.ndarray:
+def orbit_points(radius: int) -> tuple[complex, ...]:
     """Points at the angles 0..719 degrees on a spotlight's orbit (pygame's rotation, for the reference's floats).
 
     Spotlights start, turn and end at angles ``start`` (0..359), ``start + 180 + (-45..44)`` and that plus
-    ``-135..134``, all within 0..719.
+    ``-135..134``, all within 0..719. (Python complex numbers: a spotlight record is built from a tuple of them.)
     """
     orbit = pygame.math.Vector2(SPOT_ORBIT + radius, 0)
     points = [SCREEN_CENTRE + orbit.rotate(float(angle)) for angle in range(720)]
-    table = np.array([complex(point.x, point.y) for point in points])
-    table.setflags(write=False)
-    return table
+    return tuple(complex(point.x, point.y) for point in points)
 
 
 @cache
@@ -742,7 +740,7 @@ class SearingSpotlightsCore(BatchedCore):
         offset = target + draws.integers(-135, 135)
         points = orbit_points(radius)
         start, target, offset = points[start], points[target], points[offset]
-        reach = radius + float(self.agent_radius[k])
+        reach = float(radius + self.agent_radius.item(k))
         return (radius, self.tables.base(radius), reach, speed, 0.0, start, target, offset, start, False, True, False)
 
     def _append_spot(self, k: int) -> None:
