@@ -144,6 +144,15 @@ def floor_rows(kind: int, hit: bool) -> np.ndarray:
 
 
 @cache
+def floor_pair(kind: int, red_feedback: bool) -> np.ndarray:
+    """The floor of the lit pictures (see ``SearingSpotlightsCore.lit``): blue, then red on hit steps if
+    ``red_feedback``."""
+    pair = np.stack([floor_rows(kind, False), floor_rows(kind, red_feedback)])
+    pair.setflags(write=False)
+    return pair
+
+
+@cache
 def coin_sprite(scale: float) -> Sprite:
     """A coin: a yellow disc with an orange rim of width int(2 * scale); width 0 makes pygame fill it orange."""
     radius = int(10 * scale)
@@ -348,7 +357,8 @@ def block_position(mask: np.ndarray, x: int, y: int, radius: int) -> None:
 def sample_position(
     mask: np.ndarray, rng: np.random.Generator | DirectDraws, radius: int, empty: bool = False
 ) -> tuple[int, int]:
-    """A uniformly drawn free pixel (row-major order of the free ones), which is then blocked with ``radius``.
+    """A uniformly drawn free pixel (row-major order of the free ones), which is then blocked with ``radius`` (0:
+    not blocked, for the last draw from a mask).
 
     ``empty`` says that nothing is blocked yet, so the drawn index is the pixel itself.
     """
@@ -360,7 +370,8 @@ def sample_position(
             raise RuntimeError("no free spawn position left: too many coins for the arena (reduce num_coins)")
         cell = int(free[rng.integers(0, free.size)])
     y, x = divmod(cell, SCREEN)
-    block_position(mask, x, y, radius)
+    if radius:
+        block_position(mask, x, y, radius)
     return x, y
 
 
@@ -803,7 +814,8 @@ class SearingSpotlightsCore(BatchedCore):
         mask = np.zeros((SCREEN, SCREEN), bool)
         self.heading[k] = draws.integers(0, 8)  # heading index (x 45 degrees): what rng.choice draws
         if opts["sample_agent_position"]:
-            x, y = sample_position(mask, draws, AGENT_BLOCK, empty=True)
+            # (the endless coin is drawn from a cleared sampler: nothing reads the agent's block there)
+            x, y = sample_position(mask, draws, 0 if self.endless else AGENT_BLOCK, empty=True)
             x, y = x + draws.integers(2, 4), y + draws.integers(2, 4)  # not clamped (kept quirk)
         else:
             x, y = CENTRE, CENTRE
@@ -824,7 +836,7 @@ class SearingSpotlightsCore(BatchedCore):
             cx, cy = cx + draws.integers(2, 4), cy + draws.integers(2, 4)
             self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
         if opts["use_exit"]:
-            ex, ey = sample_position(mask, draws, ITEM_BLOCK)
+            ex, ey = sample_position(mask, draws, 0)  # (the last draw from this mask)
             ex, ey = ex + draws.integers(2, 4), ey + draws.integers(2, 4)
             self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
             if num_coins == 0:
@@ -844,7 +856,7 @@ class SearingSpotlightsCore(BatchedCore):
         mask = np.zeros((SCREEN, SCREEN), bool)
         if previous is not None:
             block_position(mask, previous[0], previous[1], AGENT_BLOCK)
-        cx, cy = sample_position(mask, draws, AGENT_BLOCK, empty=previous is None)
+        cx, cy = sample_position(mask, draws, 0, empty=previous is None)  # (the mask is not drawn from again)
         cx, cy = cx + draws.integers(2, 4), cy + draws.integers(2, 4)
         self.item_map[k] = 0
         self._place_coin(k, 0, _clamp_item(cx), _clamp_item(cy))
@@ -1240,9 +1252,7 @@ class SearingSpotlightsCore(BatchedCore):
         """Slot k's lit pictures (blue and red floor) with its coins and exit, in the reference's order."""
         rows = self.lit[:, k]
         self.under_key[k] = -1  # rebuild the picture under the darkness
-        kind = int(self.floor_kind[k])
-        rows[0] = floor_rows(kind, False)
-        rows[1] = floor_rows(kind, bool(self.red_feedback[k]))
+        rows[...] = floor_pair(int(self.floor_kind[k]), bool(self.red_feedback[k]))
         if self.coins_left[k]:
             coin, radius = coin_sprite(float(self.coin_scale[k])), int(10 * self.coin_scale[k])
             for j in self.coin_alive[k].nonzero()[0]:
