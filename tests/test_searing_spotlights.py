@@ -569,6 +569,29 @@ def test_observations_hand_over_the_frames_and_the_core_draws_them_again(env_id:
         np.testing.assert_array_equal(lender.agent_frame(t % 4), expected[t % 4])
 
 
+@pytest.mark.parametrize("options", [{}, {"agent_visible": True, "light_dim_off_duration": 0}])
+def test_pictures_under_the_darkness_updated_one_by_one_equal_those_updated_in_a_batch(options: dict) -> None:
+    """``_update_under`` has a batched path and a one-by-one path for a few changed slots: both give the same
+    pictures and frames (moving agents, red floors on hits, new levels)."""
+    batched, one_by_one = (SearingSpotlightsCore(num_envs=8, options=options) for _ in range(2))
+    batched.FEW_UNDER_UPDATES, one_by_one.FEW_UNDER_UPDATES = 0, 10**9
+    for core in (batched, one_by_one):
+        core.reset_slots(range(8), list(range(100, 108)))
+    rng = np.random.default_rng(11)
+    hits = resets = 0
+    for _ in range(200):
+        actions = rng.integers(0, 3, (8, 2)) * (rng.random((8, 1)) < 0.5)  # some agents stand still
+        for core in (batched, one_by_one):
+            _, terminated, _ = core.step(actions)
+            done = np.flatnonzero(terminated)
+            core.reset_slots(done, (1000 + done + 8 * resets).tolist())
+        resets += int(done.size > 0)
+        hits += int(np.count_nonzero(batched.hit))
+        np.testing.assert_array_equal(batched.under, one_by_one.under)
+        np.testing.assert_array_equal(batched.observations(), one_by_one.observations())
+    assert hits > 20 and resets > 0
+
+
 def test_endless_first_coin_can_spawn_within_reach_of_the_agent() -> None:
     """Quirk 19 (kept): the sampler is cleared before the first coin, so it may land on the agent."""
     env = make("Endless-SearingSpotlights-v0")
