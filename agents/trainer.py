@@ -23,7 +23,6 @@ import math
 import os
 import platform
 import random
-import subprocess
 import sys
 import time
 from collections import deque
@@ -38,6 +37,7 @@ import yaml
 import envs
 from agents.buffer import RolloutBuffer
 from agents.config import Config, config_from_dict, config_to_dict, dump_config
+from agents.io import atomic_write_bytes, now, provenance, write_json_atomic
 from agents.models import ActorCritic, sample_actions
 from agents.ppo import explained_variance, gae_advantages, ppo_update
 from agents.sequences import split_sequences
@@ -389,8 +389,8 @@ class Trainer:
         info_path = self.run_dir / "run_info.json"
         info = json.loads(info_path.read_text()) if info_path.exists() else run_info(self.config)
         if self.update > 0:
-            info.setdefault("resumed", []).append({"time": _now(), "update": self.update, "command": sys.argv})
-        atomic_write_bytes(info_path, (json.dumps(info, indent=2) + "\n").encode())
+            info.setdefault("resumed", []).append({"time": now(), "update": self.update, "command": sys.argv})
+        write_json_atomic(info_path, info, sort_keys=False)
 
 
 # ----------------------------------------------------------------------------------------------- helpers
@@ -516,75 +516,9 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
     return paths[-1] if paths else None
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to a temporary file next to ``path``, flush it to disk, then rename it over ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    with open(temporary, "wb") as handle:
-        handle.write(data)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(temporary, path)
-
-
 def run_info(config: Config) -> dict[str, Any]:
-    """Seed, versions, git revision and machine of a run (``run_info.json``)."""
-    return {
-        "seed": config.run.seed,
-        "started": _now(),
-        "command": sys.argv,
-        "num_updates": config.num_updates,
-        "batch_size": config.batch_size,
-        "versions": versions(),
-        "git": git_revision(),
-        "machine": machine_info(),
-    }
-
-
-def versions() -> dict[str, str]:
-    import gymnasium
-
-    return {
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "numpy": np.__version__,
-        "gymnasium": gymnasium.__version__,
-    }
-
-
-def git_revision() -> dict[str, Any]:
-    """The repository's commit and whether the working tree had uncommitted changes ('unknown' outside git)."""
-    root = Path(__file__).resolve().parent.parent
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True, timeout=10
-        ).stdout.strip()
-        status = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=root,
-            capture_output=True,
-            text=True,
-            check=True,
-            timeout=10,
-        ).stdout
-        return {"revision": commit, "dirty": bool(status.strip())}
-    except (OSError, subprocess.SubprocessError):
-        return {"revision": "unknown", "dirty": None}
-
-
-def machine_info() -> dict[str, Any]:
-    return {
-        "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "torch_threads": torch.get_num_threads(),
-        "cuda": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None,
-    }
-
-
-def _now() -> str:
-    return datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+    """Seed, run size and provenance (versions, git revision, machine) of a run (``run_info.json``)."""
+    return {"seed": config.run.seed, "num_updates": config.num_updates, "batch_size": config.batch_size, **provenance()}
 
 
 def default_run_dir(config_path: str | Path, seed: int, root: str | Path = "runs") -> Path:

@@ -23,10 +23,6 @@ Ratios: ours/reference for (a), and (b, 64 slots)/reference (a). Results go to `
 from __future__ import annotations
 
 import argparse
-import datetime
-import os
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -38,9 +34,9 @@ sys.path.insert(0, str(ROOT))
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
+from agents.io import provenance, write_json_atomic  # noqa: E402
 from envs import ENV_IDS, make_core  # noqa: E402
 from scripts.bench_protocol import time_constant_action_episodes  # noqa: E402
-from scripts.io_utils import write_json_atomic  # noqa: E402
 
 BENCH_IDS = [env_id for env_id in ENV_IDS if env_id != "ProofOfMemory-v0"]
 SLOT_COUNTS = (16, 64)
@@ -92,29 +88,6 @@ def reference_single(env_id: str, episodes: int) -> float | None:
 
     result = run_reference_bench([env_id], episodes=episodes)
     return None if result is None else result.get(env_id)
-
-
-def machine_info() -> dict[str, Any]:
-    import pygame
-
-    def git(*args: str) -> str:
-        try:
-            return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
-        except (OSError, subprocess.CalledProcessError):
-            return "unknown"
-
-    return {
-        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "git_revision": git("rev-parse", "HEAD"),
-        "git_dirty": bool(git("status", "--porcelain", "--untracked-files=no")),
-        "platform": platform.platform(),
-        "processor": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "gymnasium": gym.__version__,
-        "pygame": pygame.version.ver,
-    }
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -171,7 +144,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             flush=True,
         )
     report = {
-        "machine": machine_info(),
+        **provenance(),
         "protocol": {
             "single": "gymnasium.make, constant no-op action, episode k reset with seed k, resets timed",
             "batched": "core.step on all slots (constant no-op), finished slots reset with fresh seeds, "

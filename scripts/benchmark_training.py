@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import os
 import statistics
 import sys
@@ -34,10 +33,11 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 from agents.config import Config, load_config  # noqa: E402
+from agents.io import git_revision, machine_info, versions, write_json_atomic  # noqa: E402
 from agents.models import log_probs_and_entropy  # noqa: E402
 from agents.ppo import filled_index, rows  # noqa: E402
 from agents.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
-from agents.trainer import Trainer, atomic_write_bytes, git_revision, machine_info, versions  # noqa: E402
+from agents.trainer import Trainer  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -199,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
         record["versions"]["sb3_contrib"] = sb3_contrib.__version__
         record["setting"]["sb3_network"] = "RecurrentPPO default for the observation space (LSTM 256, actor/critic)"
     out = Path(args.out)
-    atomic_write_bytes(out, (json.dumps(record, indent=2) + "\n").encode())
+    write_json_atomic(out, record, sort_keys=False)
 
     rows = [
         ("end to end (ours), steps/s", "end_to_end_steps_per_s"),

@@ -12,8 +12,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from agents.io import write_json_atomic  # noqa: E402
 from envs import ENV_IDS  # noqa: E402
-from scripts.io_utils import write_json_atomic  # noqa: E402
 from tests.parity import REFERENCE_IDS, replay, replay_batched  # noqa: E402
 
 

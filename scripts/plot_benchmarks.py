@@ -6,14 +6,15 @@ Usage: python scripts/plot_benchmarks.py [--json results/benchmarks/envs.json] [
 from __future__ import annotations
 
 import argparse
+import io
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from agents.io import atomic_write_bytes  # noqa: E402
 
 SERIES = (  # (label, how to read the value from one id's result)
     ("memory-gym 1.0.2, 1 env", lambda r: r.get("reference_single_steps_per_s")),
@@ -47,10 +48,9 @@ def plot(results: dict, out: Path) -> None:
     ax.legend(ncols=5, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 1.12))
     ax.grid(axis="y", which="both", alpha=0.3)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=out.parent, suffix=".png", delete=False) as f:
-        fig.savefig(f, format="png", dpi=110)
-    os.replace(f.name, out)
+    image = io.BytesIO()
+    fig.savefig(image, format="png", dpi=110)
+    atomic_write_bytes(out, image.getvalue())
     plt.close(fig)
 
 

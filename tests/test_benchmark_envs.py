@@ -23,7 +23,7 @@ def test_quick_benchmark_writes_report(tmp_path: Path, capsys) -> None:
             assert row[slots]["steps"] >= 256 and row[slots]["steps_per_s"] > 0
         assert row["reference_single_steps_per_s"] is None
     machine = report["machine"]
-    assert machine["git_revision"] and machine["numpy"] and machine["cpu_count"]
+    assert report["git"]["revision"] and report["versions"]["numpy"] and machine["cpu_count"]
     printed = capsys.readouterr().out
     assert all(env_id in printed for env_id in ids)
     assert "ProofOfMemory-v0" not in benchmark_envs.BENCH_IDS

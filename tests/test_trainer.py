@@ -161,7 +161,7 @@ def test_run_directory_holds_config_versions_scalars_and_pruned_checkpoints(tmp_
     trainer.train()
     assert load_config(tmp_path / "config.yaml") == config
     info = json.loads((tmp_path / "run_info.json").read_text())
-    assert info["seed"] == 3 and set(info["versions"]) == {"python", "torch", "numpy", "gymnasium"}
+    assert info["seed"] == 3 and {"python", "torch", "numpy", "gymnasium"} <= set(info["versions"])
     assert info["git"]["revision"] and "machine" in info
     assert sorted(p.name for p in (tmp_path / "checkpoints").iterdir()) == ["update_0000005.pt", "update_0000006.pt"]
     events = EventAccumulator(str(tmp_path))
