@@ -29,8 +29,8 @@ import yaml
 
 import envs
 
-MEMORY_KINDS = ("none", "gru", "lstm")  # "trxl" joins here once agents.models implements it
-ENCODER_KINDS = ("nature_cnn",)
+NO_LM = "none"
+DEFAULT_EVAL_SEEDS = 30  # the paper: 30 novel seeds x 5 repetitions
 
 
 class ConfigError(ValueError):
@@ -75,14 +75,37 @@ class EnvConfig:
     id: str = param("ProofOfMemory-v0", "environment id (see envs.ENV_IDS)")
     options: dict[str, Any] = param({}, "reset options of the environment (its own names and ranges)")
     train_seeds: list[int] = param([0, 99_999], "inclusive range [low, high] that episode seeds are drawn from")
+    frame_skip: int = param(
+        1, "env steps per decision: the action is repeated, rewards summed, an episode end stops the repeat", low=1
+    )
+
+
+@dataclass
+class HelmConfig:
+    """The HELM branch: grayscale frame -> random projection -> frozen Hopfield retrieval over a language model's
+    token embeddings -> the frozen causal transformer with a memory of the episode's last ``mem_len`` steps.
+    Its output joins the CNN features; it is computed once during the rollout and cached (agents/helm.py)."""
+
+    lm: str = param(NO_LM, "'none' (no branch), 'random' (a seeded random transformer), a hub name or a local dir")
+    beta: float = param(1000.0, "inverse temperature of the Hopfield retrieval (the paper's 1000)", low=0.0)
+    mem_len: int = param(128, "steps of the current episode the transformer attends to", low=1)
+    seed: int = param(0, "seed of the random projection (and of the weights when lm is 'random')", low=0)
+    random_layers: int = param(2, "layers of the 'random' transformer", low=1)
+    random_width: int = param(128, "embedding width of the 'random' transformer", low=8)
+    random_heads: int = param(4, "attention heads of the 'random' transformer", low=1)
+    random_vocab: int = param(4096, "token-embedding rows of the 'random' transformer", low=2)
+
+    @property
+    def enabled(self) -> bool:
+        return self.lm != NO_LM
 
 
 @dataclass
 class ModelConfig:
     """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
 
-    encoder: str = param("nature_cnn", f"visual encoder, one of {ENCODER_KINDS}")
-    memory: str = param("gru", f"memory module, one of {MEMORY_KINDS}")
+    encoder: str = param("nature_cnn", "visual encoder (agents.models.ENCODERS)")
+    memory: str = param("gru", "memory module (agents.models.MEMORY_MODULES): none, gru, lstm")
     memory_size: int = param(512, "hidden units of the recurrent layer", low=1)
     memory_layers: int = param(1, "stacked recurrent layers", low=1)
     hidden_size: int = param(512, "units of the body layer and of each of the policy and value streams", low=1)
@@ -91,6 +114,11 @@ class ModelConfig:
     )
     previous_action: bool = param(False, "feed the previous action (one-hot per branch, zeros at reset)")
     previous_reward: bool = param(False, "feed the previous reward (zero at reset)")
+    frame_stack: int = param(
+        1, "last k observations concatenated along channels (1: none; paper: 4 RGB, 16 gray)", low=1
+    )
+    grayscale: bool = param(False, "turn images into one luma channel (ITU-R 601) before stacking")
+    helm: HelmConfig = param(HelmConfig(), "the HELM branch (off unless helm.lm is set)")
 
 
 @dataclass
@@ -127,6 +155,19 @@ class RunConfig:
     checkpoint_interval: int = param(100, "updates between checkpoints (0: only at the end)", low=0)
     keep_checkpoints: int = param(2, "most recent checkpoints kept on disk (0: keep all)", low=0)
     progress_bar: bool = param(True, "show a tqdm progress bar")
+    method: str = param("", "short name of the agent in records and plots (empty: derived, e.g. gru, stack4, helm)")
+    task: str = param("", "short name of the task in records and plots (empty: the env id)")
+
+
+@dataclass
+class EvalConfig:
+    """Evaluation on novel seeds during training (the paper: 30 seeds x 5 repetitions, actions sampled)."""
+
+    interval: int = param(0, "updates between evaluations (0: none during training)", low=0)
+    seeds: list[int] = param([], "inclusive range [low, high] of novel seeds (empty: the 30 after env.train_seeds)")
+    repetitions: int = param(5, "episodes per seed", low=1)
+    greedy: bool = param(False, "act by argmax instead of sampling (the paper samples)")
+    seed: int = param(0, "seed of the evaluation's action sampling", low=0)
 
 
 @dataclass
@@ -137,6 +178,7 @@ class Config:
     model: ModelConfig = param(ModelConfig(), "actor-critic model")
     ppo: PPOConfig = param(PPOConfig(), "PPO hyperparameters")
     run: RunConfig = param(RunConfig(), "run length, width, device and seed")
+    eval: EvalConfig = param(EvalConfig(), "evaluation on novel seeds during training")
     grid: dict[str, list] = param({}, "swept keys for scripts/sweep.py: {dotted.key: [values]}")
 
     @property
@@ -146,6 +188,31 @@ class Config:
     @property
     def num_updates(self) -> int:
         return self.run.total_steps // self.batch_size
+
+    @property
+    def method(self) -> str:
+        """The agent's short name: ``run.method``, else derived from the model (ppo, gru, lstm, stack4, helm...)."""
+        if self.run.method:
+            return self.run.method
+        model = self.model
+        parts = [] if model.memory == "none" else [model.memory]
+        if model.frame_stack > 1:
+            parts.append(f"stack{model.frame_stack}")
+        if model.helm.enabled:
+            parts.append("helm")
+        return "-".join(parts) or "ppo"
+
+    @property
+    def task(self) -> str:
+        return self.run.task or self.env.id
+
+    @property
+    def eval_seeds(self) -> list[int]:
+        """The inclusive [low, high] of evaluation seeds: ``eval.seeds``, else the 30 right after the training ones."""
+        if self.eval.seeds:
+            return list(self.eval.seeds)
+        high = self.env.train_seeds[1]
+        return [high + 1, high + DEFAULT_EVAL_SEEDS]
 
 
 # ------------------------------------------------------------------------------------------------- loading
@@ -221,8 +288,8 @@ def _set_dotted(tree: dict, key: str, value: Any) -> None:
         child = get_type_hints(cls)[part] if cls is not None else None
         if cls is not None and not (_is_dataclass_type(child) or get_origin(child) is dict):
             raise ConfigError(f"key {key!r}: {here!r} is a {getattr(child, '__name__', child)}, it has no sub-keys")
-        if child is Schedule and _is_number(node.get(part)):
-            node[part] = _constant_schedule(node[part])
+        if child is Schedule and _is_number(_float_or_text(node.get(part))):
+            node[part] = _constant_schedule(_float_or_text(node[part]))
         elif not isinstance(node.get(part), dict):
             node[part] = {}
         node = node[part]
@@ -236,6 +303,8 @@ def _constant_schedule(value: float) -> dict:
 
 def _build(cls: type, raw: Any, prefix: str, defaults: Any = None) -> Any:
     """An instance of dataclass ``cls`` from ``raw``; missing keys come from ``defaults`` (or the class)."""
+    if cls is Schedule and isinstance(raw, str):
+        raw = _float_or_text(raw)  # YAML 1.1 reads 1e-3 (no dot) as a string
     if cls is Schedule and _is_number(raw):
         raw = _constant_schedule(raw)
     if not isinstance(raw, Mapping):
@@ -319,8 +388,18 @@ def _check_block(block: Any, prefix: str) -> None:
     if isinstance(block, EnvConfig):
         _check_env(block, prefix)
     elif isinstance(block, ModelConfig):
-        _choice(f"{prefix}.encoder", block.encoder, ENCODER_KINDS)
-        _choice(f"{prefix}.memory", block.memory, MEMORY_KINDS)
+        from agents.models import ENCODERS, MEMORY_MODULES  # the registries the model is built from
+
+        _choice(f"{prefix}.encoder", block.encoder, tuple(ENCODERS))
+        _choice(f"{prefix}.memory", block.memory, tuple(MEMORY_MODULES))
+    elif isinstance(block, HelmConfig):
+        if block.random_width % block.random_heads:
+            raise ConfigError(
+                f"{prefix}.random_width={block.random_width} is invalid: expected a multiple of "
+                f"{prefix}.random_heads={block.random_heads}"
+            )
+    elif isinstance(block, EvalConfig):
+        _seed_range(f"{prefix}.seeds", block.seeds, allow_empty=True)
     elif isinstance(block, PPOConfig):
         _choice(f"{prefix}.advantage_normalization", block.advantage_normalization, ("minibatch", "batch", "none"))
         length = block.sequence_length
@@ -343,9 +422,24 @@ def _check_env(block: EnvConfig, prefix: str) -> None:
         envs.make_core(block.id, 1, block.options)
     except ValueError as err:
         raise ConfigError(f"{prefix}.options: {err}") from err
-    seeds = block.train_seeds
+    _seed_range(f"{prefix}.train_seeds", block.train_seeds)
+
+
+def _seed_range(key: str, seeds: list[int], allow_empty: bool = False) -> None:
+    if allow_empty and not seeds:
+        return
     if len(seeds) != 2 or not 0 <= seeds[0] <= seeds[1]:
-        raise ConfigError(f"{prefix}.train_seeds={seeds!r} is invalid: expected [low, high] with 0 <= low <= high")
+        empty = " (or [] for the default)" if allow_empty else ""
+        raise ConfigError(f"{key}={seeds!r} is invalid: expected [low, high] with 0 <= low <= high{empty}")
+
+
+def check_disjoint_seeds(train: list[int], evaluation: list[int]) -> None:
+    """Evaluation seeds must be novel: refuse a range that overlaps the training range, naming both."""
+    if evaluation[0] <= train[1] and train[0] <= evaluation[1]:
+        raise ConfigError(
+            f"evaluation seeds [{evaluation[0]}, {evaluation[1]}] overlap the training seeds (env.train_seeds) "
+            f"[{train[0]}, {train[1]}]: evaluate on novel seeds, e.g. [{train[1] + 1}, {train[1] + DEFAULT_EVAL_SEEDS}]"
+        )
 
 
 def _check_cross_fields(config: Config) -> None:
@@ -359,6 +453,7 @@ def _check_cross_fields(config: Config) -> None:
             f"ppo.sequence_length={config.ppo.sequence_length!r} needs a memory module; "
             "with model.memory=none use 'max' or 1 (every step is its own sequence)"
         )
+    check_disjoint_seeds(config.env.train_seeds, config.eval_seeds)
     for key, values in config.grid.items():
         if not isinstance(values, list) or not values:
             raise ConfigError(f"grid.{key}={values!r} is invalid: expected a non-empty list of values")
@@ -389,7 +484,10 @@ def _join(prefix: str, key: str) -> str:
     return f"{prefix}.{key}" if prefix else key
 
 
-def _float_or_text(text: str) -> float | str:
+def _float_or_text(text: Any) -> Any:
+    """A string that spells a number (``1e-3``, ``1.0e-3``, ``0.001``) as that float; anything else unchanged."""
+    if not isinstance(text, str):
+        return text
     try:
         return float(text)
     except ValueError:

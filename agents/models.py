@@ -6,6 +6,9 @@
     vector obs, previous action (one-hot), previous reward ---+-> concat -> memory -> body FC -> policy FC -> heads
                                 -> Linear(128) + ReLU --------+                               -> value FC  -> value
 
+The encoder and the memory module come from one registry each (:data:`ENCODERS`, :data:`MEMORY_MODULES`), which the
+config validation reads too. With frame stacking the image (and vector) input holds the last k observations along
+the channels; with the HELM branch, its cached output (:mod:`agents.helm`) joins the CNN features.
 The memory module is ``none`` (identity), ``gru`` or ``lstm``. Non-recurrent layers always see a flat batch of
 real steps; only the memory module sees the (sequences, length) layout, which it takes from the padding mask of
 the minibatch (:meth:`RecurrentMemory.sequences`, which runs the recurrence packed, so padding costs nothing; the
@@ -15,14 +18,15 @@ A memory module keeps its state as one tensor per environment
 (a frozen feature extractor whose outputs the buffer caches) plug into the same seams: a new entry in
 :data:`MEMORY_MODULES`, or a new encoder concatenated in :meth:`ActorCritic.encode`.
 
-Initialisation (baselines.md 1.5): orthogonal weights with gain sqrt(2) for hidden and recurrent layers, 0.1 for
-the policy heads, 1 for the value head; all biases 0.
+Initialisation, as in the authors' code: orthogonal weights with gain sqrt(2) for hidden and recurrent layers, 0.1
+for the policy heads, 1 for the value head; convolution and linear biases keep PyTorch's default (uniform) init, and
+only the recurrent biases are zeroed.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -32,7 +36,7 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 from torch.nn.utils.rnn import PackedSequence
 
-from agents.config import MEMORY_KINDS, ModelConfig
+from agents.config import ModelConfig
 from agents.packed_gru import packed_gru
 
 HIDDEN_GAIN = math.sqrt(2)
@@ -57,14 +61,14 @@ def action_branches(action_space: gym.Space) -> list[int]:
     raise ValueError(f"unsupported action space {action_space}: expected Discrete or 1-d MultiDiscrete")
 
 
-def model_inputs(observation_space: gym.Space, action_space: gym.Space, config: ModelConfig) -> dict[str, InputField]:
-    """The inputs the model takes at every step.
+OBSERVATION_KEYS = {"visual_observation": "image", "vector_observation": "vector"}  # core key -> model input
 
-    ``image``: uint8 (H, W, C); ``vector``: float32 (D,) when the observation has a vector part;
-    ``previous_action``: int64 (branches,) and ``previous_reward``: float32 () when the config feeds them.
-    """
+
+def observation_fields(observation_space: gym.Space, grayscale: bool = False) -> dict[str, InputField]:
+    """One step's observation as model inputs, before stacking: ``image`` uint8 (H, W, C), one luma channel with
+    ``grayscale``, and ``vector`` float32 (D,) when the observation has a vector part."""
     if isinstance(observation_space, gym.spaces.Dict):
-        unknown = set(observation_space.spaces) - {"visual_observation", "vector_observation"}
+        unknown = set(observation_space.spaces) - set(OBSERVATION_KEYS)
         if unknown or "visual_observation" not in observation_space.spaces:
             raise ValueError(
                 f"unsupported Dict observation keys {sorted(observation_space.spaces)}: expected "
@@ -76,13 +80,34 @@ def model_inputs(observation_space: gym.Space, action_space: gym.Space, config: 
         image_space, vector_space = observation_space, None
     if not (isinstance(image_space, gym.spaces.Box) and image_space.dtype == np.uint8 and len(image_space.shape) == 3):
         raise ValueError(f"unsupported image space {image_space}: expected a uint8 Box of shape (H, W, C)")
-    fields = {"image": InputField(tuple(image_space.shape), torch.uint8)}
+    height, width, channels = image_space.shape
+    fields = {"image": InputField((height, width, 1 if grayscale else channels), torch.uint8)}
     if vector_space is not None:
         fields["vector"] = InputField((int(np.prod(vector_space.shape)),), torch.float32)
+    return fields
+
+
+def model_inputs(
+    observation_space: gym.Space, action_space: gym.Space, config: ModelConfig, helm_size: int = 0
+) -> dict[str, InputField]:
+    """The inputs the model takes at every step.
+
+    ``image``: uint8 (H, W, k C) for k stacked frames; ``vector``: float32 (k D,) when the observation has a vector
+    part; ``previous_action``: int64 (branches,), -1 where there is none (an episode's first step), and
+    ``previous_reward``: float32 () when the config feeds them; ``helm``: float32 (helm_size,), the HELM branch's
+    output, when it is on.
+    """
+    k = config.frame_stack
+    fields = {
+        name: InputField((*field.shape[:-1], k * field.shape[-1]), field.dtype)
+        for name, field in observation_fields(observation_space, config.grayscale).items()
+    }
     if config.previous_action:
         fields["previous_action"] = InputField((len(action_branches(action_space)),), torch.int64)
     if config.previous_reward:
         fields["previous_reward"] = InputField((), torch.float32)
+    if helm_size:
+        fields["helm"] = InputField((helm_size,), torch.float32)
     return fields
 
 
@@ -93,11 +118,13 @@ def compute_dtype(weight: Tensor) -> torch.dtype:
 
 
 def orthogonal(layer: nn.Module, gain: float) -> nn.Module:
-    """Orthogonal weights with ``gain`` and zero biases, in place; returns the layer."""
+    """Orthogonal weights with ``gain``, in place; returns the layer. Biases keep PyTorch's default init, except a
+    recurrent layer's, which start at zero (as in the authors' code, baselines.md section 1)."""
+    recurrent = isinstance(layer, nn.RNNBase)
     for name, param in layer.named_parameters():
         if "weight" in name:
             nn.init.orthogonal_(param, gain)
-        elif "bias" in name:
+        elif "bias" in name and recurrent:
             nn.init.zeros_(param)
     return layer
 
@@ -224,33 +251,40 @@ class RecurrentMemory(nn.Module):
         return torch.stack((hidden.transpose(0, 1), cell.transpose(0, 1)), dim=1)
 
 
-def make_memory(config: ModelConfig, input_size: int) -> NoMemory | RecurrentMemory:
-    if config.memory == "none":
-        return NoMemory(input_size)
-    if config.memory in ("gru", "lstm"):
-        return RecurrentMemory(config.memory, input_size, config.memory_size, config.memory_layers)
-    raise ValueError(f"model.memory={config.memory!r} is invalid; valid choices: {', '.join(MEMORY_KINDS)}")
+# The one registry of memory modules (the config validation reads its keys): name -> builder(config, input size).
+MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], nn.Module]] = {
+    "none": lambda config, input_size: NoMemory(input_size),
+    "gru": lambda config, input_size: RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers),
+    "lstm": lambda config, input_size: RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers),
+}
+
+# The one registry of visual encoders: name -> class taking the (H, W, C) image shape, with ``output_size``.
+ENCODERS: dict[str, Callable[[tuple[int, int, int]], nn.Module]] = {"nature_cnn": NatureCNN}
 
 
 class ActorCritic(nn.Module):
     """Shared trunk (encoders, memory, body) with separate policy and value streams."""
 
-    def __init__(self, observation_space: gym.Space, action_space: gym.Space, config: ModelConfig) -> None:
+    def __init__(
+        self, observation_space: gym.Space, action_space: gym.Space, config: ModelConfig, helm_size: int = 0
+    ) -> None:
+        """``helm_size``: width of the HELM branch's output (0: no branch); the branch itself is frozen and lives
+        with the actor, which caches its outputs as the ``helm`` input."""
         super().__init__()
         self.action_dims = action_branches(action_space)
-        self.inputs = model_inputs(observation_space, action_space, config)
-        self.image_encoder = NatureCNN(self.inputs["image"].shape)  # type: ignore[arg-type]
+        self.inputs = model_inputs(observation_space, action_space, config, helm_size)
+        self.image_encoder = ENCODERS[config.encoder](self.inputs["image"].shape)  # type: ignore[arg-type]
         vector_size = self.inputs["vector"].shape[0] if "vector" in self.inputs else 0
         vector_size += sum(self.action_dims) if config.previous_action else 0
         vector_size += 1 if config.previous_reward else 0
         self.vector_encoder = None
-        feature_size = self.image_encoder.output_size
+        feature_size = self.image_encoder.output_size + helm_size
         if vector_size:
             self.vector_encoder = nn.Sequential(
                 orthogonal(nn.Linear(vector_size, config.vector_encoder_size), HIDDEN_GAIN), nn.ReLU()
             )
             feature_size += config.vector_encoder_size
-        self.memory = make_memory(config, feature_size)
+        self.memory = MEMORY_MODULES[config.memory](config, feature_size)
         hidden = config.hidden_size
         self.body = nn.Sequential(orthogonal(nn.Linear(self.memory.output_size, hidden), HIDDEN_GAIN), nn.ReLU())
         self.policy_stream = nn.Sequential(orthogonal(nn.Linear(hidden, hidden), HIDDEN_GAIN), nn.ReLU())
@@ -269,14 +303,15 @@ class ActorCritic(nn.Module):
     def encode(self, inputs: dict[str, Tensor]) -> Tensor:
         """Features (N, F) of a flat batch of steps."""
         features = [self.image_encoder(inputs["image"])]
+        if "helm" in inputs:
+            features.append(inputs["helm"].to(features[0].dtype))
         if self.vector_encoder is not None:
             dtype = compute_dtype(self.vector_encoder[0].weight)
             vector = []
             if "vector" in inputs:
                 vector.append(inputs["vector"].to(dtype))
             if "previous_action" in inputs:
-                one_hots = [F.one_hot(inputs["previous_action"][:, i], n) for i, n in enumerate(self.action_dims)]
-                vector.extend(one_hot.to(dtype) for one_hot in one_hots)
+                vector.append(one_hot_actions(inputs["previous_action"], self.action_dims).to(dtype))
             if "previous_reward" in inputs:
                 vector.append(inputs["previous_reward"].unsqueeze(-1).to(dtype))
             features.append(self.vector_encoder(torch.cat(vector, dim=-1)))
@@ -312,12 +347,26 @@ class ActorCritic(nn.Module):
 
 
 # --------------------------------------------------------------------------------------- action distribution
-def sample_actions(logits: Sequence[Tensor], generator: torch.Generator) -> tuple[Tensor, Tensor]:
-    """Sample one action per branch; returns actions (B, branches) int64 and their log-probs (B, branches)."""
+def one_hot_actions(actions: Tensor, action_dims: Sequence[int]) -> Tensor:
+    """Actions (N, branches) as concatenated one-hots (N, sum(action_dims)); an action of -1 (none: the first step
+    of an episode) is all zeros, as in the authors' code."""
+    return torch.cat(
+        [actions[:, i : i + 1] == torch.arange(n, device=actions.device) for i, n in enumerate(action_dims)], dim=-1
+    )
+
+
+def choose_actions(
+    logits: Sequence[Tensor], generator: torch.Generator | None = None, greedy: bool = False
+) -> tuple[Tensor, Tensor]:
+    """One action per branch, sampled (or the most likely one with ``greedy``); returns actions (B, branches) int64
+    and their log-probs (B, branches)."""
     actions, log_probs = [], []
     for branch_logits in logits:
         log_p = F.log_softmax(branch_logits, dim=-1)
-        action = torch.multinomial(log_p.exp(), 1, generator=generator)
+        if greedy:
+            action = log_p.argmax(dim=-1, keepdim=True)
+        else:
+            action = torch.multinomial(log_p.exp(), 1, generator=generator)
         actions.append(action)
         log_probs.append(log_p.gather(-1, action))
     return torch.cat(actions, dim=-1), torch.cat(log_probs, dim=-1)

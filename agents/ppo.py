@@ -105,7 +105,7 @@ def ppo_update(
 
     Raises ``FloatingPointError`` (before touching the weights) when a loss or the gradient norm is not finite.
     """
-    inputs, states = buffer.flat_inputs(), buffer.flat(buffer.memory_states)
+    states = buffer.flat(buffer.memory_states)
     actions, old_log_probs = buffer.flat(buffer.actions), buffer.flat(buffer.log_probs)
     old_values, returns = buffer.flat(buffer.values), buffer.flat(buffer.returns)
     advantages = buffer.flat(buffer.advantages)
@@ -120,7 +120,7 @@ def ppo_update(
             with autocast():
                 filled = filled_index(index)
                 logits, values = model.evaluate(
-                    {name: rows(tensor, filled) for name, tensor in inputs.items()},
+                    buffer.gather(filled),
                     rows(states, batch.start_index),
                     batch.mask,
                 )

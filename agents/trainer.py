@@ -1,22 +1,22 @@
-"""The training loop: collect -> GAE -> epochs of minibatch updates -> log -> checkpoint.
+"""The training loop: collect -> GAE -> epochs of minibatch updates -> log -> evaluate -> checkpoint.
 
-The environments run in-process as one natively batched core. The trainer resets a finished slot right after the
-step that ended its episode, with a seed drawn from the training seed range by its own generator, and zeroes that
-slot's memory state and previous action/reward.
+The environments run in-process as one natively batched core, driven by the actor (:mod:`agents.actor`), which
+resets a finished slot right after the step that ended its episode with a seed drawn from the training range by the
+trainer's own generator. Every ``eval.interval`` updates (and after the last one) the current policy plays the
+novel seeds through :func:`agents.evaluation.evaluate`; the records go to ``eval/episodes.csv`` and TensorBoard.
 
 Resuming is exact: checkpoints are taken at update boundaries and hold, besides model, optimizer and every random
 generator, the episode each slot is in (its seed and the actions taken since it started). On resume each slot is
 reset with its seed and replayed, which reproduces the environment state because a slot's episode depends only on
 its seed and actions (a digest of the observations checks this). With the same seed on CPU, a resumed run ends with
-the same weights as an uninterrupted one.
+the same weights, logs and records as an uninterrupted one.
 """
 
 from __future__ import annotations
 
 import contextlib
-import copy
+import csv
 import datetime
-import hashlib
 import io
 import json
 import math
@@ -29,21 +29,29 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
-import yaml
 
 import envs
+from agents.actor import Actor, refresh_copy, rollout_copy
 from agents.buffer import RolloutBuffer
-from agents.config import Config, config_from_dict, config_to_dict, dump_config
-from agents.io import atomic_write_bytes, now, provenance, write_json_atomic
-from agents.models import ActorCritic, sample_actions
+from agents.checkpoint import (
+    build_agent,
+    checkpoint_path,
+    latest_checkpoint,
+    read_checkpoint,
+    run_config,
+    write_checkpoint,
+)
+from agents.config import Config, config_to_dict, dump_config
+from agents.evaluation import evaluate, read_records, record_means, seed_list, write_records
+from agents.io import atomic_write_text, now, provenance, write_json_atomic
+from agents.metrics import metric_of
 from agents.ppo import explained_variance, gae_advantages, ppo_update
 from agents.sequences import split_sequences
 
-CHECKPOINT_FORMAT = 1
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
+TRAINING_COLUMNS = ["run", "method", "task", "env_id", "step", "return", "length", "metric"]
 
 
 class TrainingDiverged(RuntimeError):
@@ -55,7 +63,7 @@ class Trainer:
 
     def __init__(self, config: Config, run_dir: str | Path) -> None:
         if config.grid:
-            raise ValueError("this config has a grid: block; expand it with the sweep tool, train.py runs one config")
+            raise ValueError("this config has a grid: block; expand it with scripts/sweep.py, train.py runs one config")
         self.config = config
         self.run_dir = Path(run_dir)
         self.device = _device(config.run.device)
@@ -74,44 +82,55 @@ class Trainer:
         self.action_generator = torch.Generator(device=self.device)
         self.action_generator.manual_seed(int(seeds[2].generate_state(1)[0]))
 
-        self.core = envs.make_core(config.env.id, config.run.workers, config.env.options)
-        self.action_space = self.core.single_action_space
-        self.model = ActorCritic(self.core.single_observation_space, self.action_space, config.model).to(self.device)
-        self.rollout_model = self._make_rollout_model()
+        workers = config.run.workers
+        self.core = envs.make_core(config.env.id, workers, config.env.options)
+        spaces = self.core.single_observation_space, self.core.single_action_space
+        self.model, self.helm = build_agent(config, *spaces, self.device)
+        self.rollout_model = rollout_copy(self.model, config.run.precision)
         # The fused kernel updates all parameters at once: ~10x faster than the per-tensor loop on CPU.
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.ppo.learning_rate.initial, fused=True)
-        branches = len(self.model.action_dims)
-        state_shape = self.model.state_shape
         self.buffer = RolloutBuffer(
-            config.run.workers, config.run.worker_steps, self.model.inputs, branches, state_shape, self.device
+            workers,
+            config.run.worker_steps,
+            self.model.inputs,
+            len(self.model.action_dims),
+            self.model.state_shape,
+            self.device,
+            config.model.frame_stack,
         )
-        self.staging = _HostStaging(self.buffer.inputs, self.device)
-
-        workers = config.run.workers
-        self.memory_state = self.model.initial_state(workers, self.device)
-        self.previous_action = torch.zeros((workers, branches), dtype=torch.int64, device=self.device)
-        self.previous_reward = torch.zeros(workers, device=self.device)
-        self.episode_seeds = [0] * workers
-        self.episode_actions: list[list[np.ndarray]] = [[] for _ in range(workers)]
-        self._start_episodes(list(range(workers)))
-        self.staging.load(self.core.observations())
+        self.actor = Actor(self.core, self.rollout_model, config, self.action_generator, self.helm, self.device)
+        self.actor.start(self._episode_seeds(workers), seed_source=self._episode_seeds)
         self.recent_returns: deque[float] = deque(maxlen=RECENT_EPISODES)
         self.history: list[dict[str, float]] = []
+        self.training_rows: list[dict[str, Any]] = []
+        self.eval_records: list[dict[str, Any]] = []
+        self._eval_core: Any = None
 
     # ------------------------------------------------------------------------------------------------ public
     @classmethod
     def resume(cls, run_dir: str | Path) -> Trainer:
         """The trainer of ``run_dir`` restored from its newest checkpoint."""
         run_dir = Path(run_dir)
-        config_path = run_dir / "config.yaml"
-        if not config_path.is_file():
-            raise FileNotFoundError(f"{run_dir} is not a run directory: {config_path} is missing")
-        checkpoint_path = latest_checkpoint(run_dir)
-        if checkpoint_path is None:
+        config = run_config(run_dir)
+        path = latest_checkpoint(run_dir)
+        if path is None:
             raise FileNotFoundError(f"{run_dir} holds no checkpoint to resume from (checkpoints/update_*.pt)")
-        trainer = cls(config_from_dict(yaml.safe_load(config_path.read_text())), run_dir)
-        trainer.load_checkpoint(checkpoint_path)
+        trainer = cls(config, run_dir)
+        trainer.load_checkpoint(path)
         return trainer
+
+    @property
+    def sequence_length(self) -> int | None:
+        """Steps per training sequence: 1 without a memory module, None for whole episode pieces ('max')."""
+        if self.config.model.memory == "none":
+            return 1  # no recurrence: every step is a sequence of its own, no padding exists
+        length = self.config.ppo.sequence_length
+        return None if length == "max" else int(length)
+
+    def autocast(self) -> contextlib.AbstractContextManager:
+        """The precision context of the training passes (bfloat16 autocast with ``run.precision: bf16``)."""
+        enabled = self.config.run.precision == "bf16"
+        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=enabled)
 
     def train(self) -> list[dict[str, float]]:
         """Run the remaining updates; returns one metrics dict per update run by this call."""
@@ -122,16 +141,46 @@ class Trainer:
             while self.update < self.num_updates:
                 metrics = self.train_update()
                 self.history.append(metrics)
+                self.training_rows.append(self._training_row(metrics))
+                last = self.update == self.num_updates
+                eval_interval = self.config.eval.interval
+                if eval_interval and (self.update % eval_interval == 0 or last):
+                    metrics.update(self.evaluate_now())
                 _log(writer, metrics, self.global_step)
                 _show(progress, metrics, self.recent_returns, self.config.batch_size)
                 interval = self.config.run.checkpoint_interval
-                if self.update == self.num_updates or (interval and self.update % interval == 0):
+                if last or (interval and self.update % interval == 0):
                     self.save_checkpoint()
         finally:
             writer.close()
             if progress is not None:
                 progress.close()
         return self.history
+
+    def evaluate_now(self) -> dict[str, float]:
+        """Evaluate the current policy on the novel seeds (the config's ``eval`` block), keep and write the records
+        (``eval/episodes.csv``); returns their means as ``eval/...`` scalars."""
+        config = self.config
+        seeds = seed_list(config.eval_seeds)
+        slots = len(seeds) * config.eval.repetitions
+        if self._eval_core is None:
+            self._eval_core = envs.make_core(config.env.id, slots, config.env.options)
+        records = evaluate(
+            self.rollout_model,
+            self.helm,
+            config,
+            seeds,
+            config.eval.repetitions,
+            greedy=config.eval.greedy,
+            sampling_seed=config.eval.seed,
+            step=self.global_step,
+            run=self.run_dir.name,
+            device=self.device,
+            core=self._eval_core,
+        )
+        self.eval_records = [r for r in self.eval_records if r["step"] != self.global_step] + records
+        write_records(self.run_dir / "eval" / "episodes.csv", self.eval_records)
+        return {f"eval/{key}": value for key, value in record_means(records).items()}
 
     # ------------------------------------------------------------------------------------------- one update
     def train_update(self) -> dict[str, float]:
@@ -149,7 +198,7 @@ class Trainer:
 
         buffer = self.buffer
         with torch.inference_mode():
-            _, last_values, _ = self.rollout_model.step(self._current_inputs(), self.memory_state)
+            _, last_values, _ = self.rollout_model.step(self.actor.inputs(), self.actor.memory.recurrent)
         buffer.advantages.copy_(
             gae_advantages(
                 buffer.rewards,
@@ -161,7 +210,7 @@ class Trainer:
             )
         )
         torch.add(buffer.advantages, buffer.values, out=buffer.returns)
-        sequences = split_sequences(buffer.terminated_numpy(), self._sequence_length())
+        sequences = split_sequences(buffer.terminated_numpy(), self.sequence_length)
         try:
             losses = ppo_update(
                 self.model,
@@ -172,13 +221,13 @@ class Trainer:
                 clip,
                 entropy_coef,
                 self.shuffle_rng,
-                self._autocast,
+                self.autocast,
             )
         except FloatingPointError as err:
             last = latest_checkpoint(self.run_dir)
             kept = f"the last good checkpoint is {last}" if last else "no checkpoint was written yet"
             raise TrainingDiverged(f"training stopped at update {update + 1}: {err}; {kept}") from err
-        self._refresh_rollout_model()
+        refresh_copy(self.rollout_model, self.model)
         self.update += 1
         self.global_step += config.batch_size
         seconds = time.perf_counter() - started
@@ -193,100 +242,74 @@ class Trainer:
             "losses/explained_variance": explained_variance(buffer.values.flatten(), buffer.returns.flatten()),
         }
         metrics.update({f"losses/{name}": value for name, value in losses.items()})
-        metrics.update(_episode_metrics(finished_episodes))
+        metrics.update(self._episode_metrics(finished_episodes))
         metrics["global_step"] = float(self.global_step)
         metrics["update"] = float(self.update)
         return metrics
 
     def _collect_rollout(self) -> list[dict[str, Any]]:
-        """Fill the buffer with ``worker_steps`` steps of every worker; returns the final infos of ended episodes."""
-        buffer, finished = self.buffer, []
-        with torch.inference_mode():
-            for t in range(buffer.steps):
-                inputs = self._current_inputs()
-                for name, value in inputs.items():
-                    buffer.inputs[name][:, t] = value
-                buffer.memory_states[:, t] = self.memory_state
-                logits, values, next_state = self.rollout_model.step(inputs, self.memory_state)
-                actions, log_probs = sample_actions(logits, self.action_generator)
-                buffer.actions[:, t] = actions
-                buffer.log_probs[:, t] = log_probs
-                buffer.values[:, t] = values
-
-                actions_host = actions.cpu().numpy()
-                rewards, terminated, finals = self.core.step(self._env_actions(actions_host))
-                rewards_t = torch.from_numpy(rewards.astype(np.float32)).to(self.device)
-                terminated_t = torch.from_numpy(terminated).to(self.device)
-                buffer.rewards[:, t] = rewards_t
-                buffer.terminated[:, t] = terminated_t
-
-                # The step's memory output carries on unless the episode ended: a new episode starts from zeros.
-                alive = ~terminated_t
-                self.memory_state = next_state.float() * alive.view(-1, *([1] * len(self.model.state_shape)))
-                self.previous_action = actions * alive.unsqueeze(-1)
-                self.previous_reward = rewards_t * alive
-                for slot in range(buffer.workers):
-                    self.episode_actions[slot].append(actions_host[slot])
-                for info in finals.values():
-                    finished.append(info)
-                    self.recent_returns.append(info["reward"])
-                if finals:
-                    self._start_episodes(list(finals))
-                self.staging.load(self.core.observations())
+        """Fill the buffer with ``worker_steps`` decisions of every worker; returns the final infos of ended
+        episodes."""
+        buffer, actor, finished = self.buffer, self.actor, []
+        buffer.begin(actor.memory.stacks)
+        for t in range(buffer.steps):
+            decision = actor.decide()
+            buffer.store(t, decision.newest, decision.episode_step)
+            buffer.memory_states[:, t] = decision.memory_state
+            buffer.actions[:, t] = decision.actions
+            buffer.log_probs[:, t] = decision.log_probs
+            buffer.values[:, t] = decision.values
+            outcome = actor.advance(decision)
+            buffer.rewards[:, t] = outcome.rewards
+            buffer.terminated[:, t] = outcome.terminated
+            for info in outcome.finals.values():
+                finished.append(info)
+                self.recent_returns.append(info["reward"])
         return finished
 
-    def _current_inputs(self) -> dict[str, torch.Tensor]:
-        inputs = dict(self.staging.current)
-        if "previous_action" in self.model.inputs:
-            inputs["previous_action"] = self.previous_action
-        if "previous_reward" in self.model.inputs:
-            inputs["previous_reward"] = self.previous_reward
-        return inputs
-
-    def _start_episodes(self, slots: list[int]) -> None:
-        """New episodes in ``slots``, each with a seed drawn from the training range (one draw per slot, in order)."""
+    def _episode_seeds(self, count: int) -> list[int]:
+        """Seeds of ``count`` new episodes, drawn from the training range (one draw per slot, in slot order)."""
         low, high = self.config.env.train_seeds
-        seeds = [int(self.episode_seed_rng.integers(low, high + 1)) for _ in slots]
-        self.core.reset_slots(slots, seeds)
-        for slot, seed in zip(slots, seeds, strict=True):
-            self.episode_seeds[slot] = seed
-            self.episode_actions[slot] = []
+        return [int(self.episode_seed_rng.integers(low, high + 1)) for _ in range(count)]
 
-    def _env_actions(self, actions: np.ndarray) -> np.ndarray:
-        """(workers, branches) -> the env's layout: (workers,) for Discrete, (workers, branches) otherwise."""
-        return actions[:, 0] if isinstance(self.action_space, gym.spaces.Discrete) else actions
+    def _episode_metrics(self, finals: list[dict[str, Any]]) -> dict[str, float]:
+        """Mean return, length and task metric of the episodes that ended, plus every numeric metric the environment
+        reports (under ``env/``)."""
+        if not finals:
+            return {}
+        metric = metric_of(self.config.env.id)
+        metrics = {
+            "charts/episodic_return": float(np.mean([f["reward"] for f in finals])),
+            "charts/episodic_length": float(np.mean([f["length"] for f in finals])),
+            "charts/episodes": float(len(finals)),
+            f"charts/{metric.name}": float(np.mean([metric.value(f) for f in finals])),
+        }
+        keys = sorted({key for f in finals for key, value in f.items() if _is_numeric(value)} - {"reward", "length"})
+        for key in keys:
+            values = [float(f[key]) for f in finals if key in f and _is_numeric(f[key])]
+            metrics[f"env/{key}"] = float(np.mean(values))
+        return metrics
 
-    def _sequence_length(self) -> int | None:
-        if self.config.model.memory == "none":
-            return 1  # no recurrence: every step is a sequence of its own, no padding exists
-        length = self.config.ppo.sequence_length
-        return None if length == "max" else int(length)
-
-    def _make_rollout_model(self) -> ActorCritic:
-        """The model that acts in the rollout. With bf16 it is a bfloat16 copy of the weights, refreshed after every
-        update: acting at a batch of one step per worker is bound by reading the weights, and autocast would cast
-        them anew at every step. With fp32 it is the model itself."""
-        if self.config.run.precision != "bf16":
-            return self.model
-        return copy.deepcopy(self.model).to(torch.bfloat16).requires_grad_(False)
-
-    def _refresh_rollout_model(self) -> None:
-        if self.rollout_model is not self.model:
-            with torch.no_grad():
-                for low, weight in zip(self.rollout_model.parameters(), self.model.parameters(), strict=True):
-                    low.copy_(weight)
-
-    def _autocast(self) -> contextlib.AbstractContextManager:
-        enabled = self.config.run.precision == "bf16"
-        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=enabled)
+    def _training_row(self, metrics: dict[str, float]) -> dict[str, Any]:
+        metric = metric_of(self.config.env.id)
+        return {
+            "run": self.run_dir.name,
+            "method": self.config.method,
+            "task": self.config.task,
+            "env_id": self.config.env.id,
+            "step": self.global_step,
+            "return": metrics.get("charts/episodic_return", ""),
+            "length": metrics.get("charts/episodic_length", ""),
+            "metric": metrics.get(f"charts/{metric.name}", ""),
+        }
 
     # ------------------------------------------------------------------------------------------ checkpoints
     def save_checkpoint(self) -> Path:
-        """Write ``checkpoints/update_NNNNNNN.pt`` atomically and prune old ones; returns its path."""
+        """Write ``checkpoints/update_NNNNNNN.pt`` atomically, prune old ones, and bring ``training.csv`` up to
+        date; returns the checkpoint's path."""
         if not all(torch.isfinite(p).all() for p in self.model.parameters()):
             raise TrainingDiverged(f"non-finite weights at update {self.update}; no checkpoint written")
         state = {
-            "format": CHECKPOINT_FORMAT,
             "update": self.update,
             "global_step": self.global_step,
             "config": config_to_dict(self.config),
@@ -305,40 +328,20 @@ class Trainer:
                 "shuffle": self.shuffle_rng.bit_generator.state,
                 "episode_seeds": self.episode_seed_rng.bit_generator.state,
             },
-            "env": {
-                "seeds": list(self.episode_seeds),
-                "actions": [np.array(a) for a in self.episode_actions],
-                "observation_digest": self._observation_digest(),
-            },
-            "rollout": {
-                "memory_state": self.memory_state.clone(),
-                "previous_action": self.previous_action.clone(),
-                "previous_reward": self.previous_reward.clone(),
-            },
+            "actor": self.actor.state(),
             "recent_returns": list(self.recent_returns),
         }
-        directory = self.run_dir / "checkpoints"
-        directory.mkdir(parents=True, exist_ok=True)
-        path = directory / f"update_{self.update:07d}.pt"
-        buffer = io.BytesIO()
-        torch.save(state, buffer)
-        atomic_write_bytes(path, buffer.getvalue())
+        _write_csv(self.run_dir / "training.csv", TRAINING_COLUMNS, self.training_rows)
         keep = self.config.run.keep_checkpoints
-        if keep:
-            for old in sorted(directory.glob("update_*.pt"))[:-keep]:
-                old.unlink()
-        return path
+        return write_checkpoint(checkpoint_path(self.run_dir, self.update), state, keep)
 
     def load_checkpoint(self, path: str | Path) -> None:
-        # Loaded on the CPU: RNG states must stay CPU tensors; weights and optimizer state move to their device.
-        state = torch.load(path, map_location="cpu", weights_only=False)
-        if state.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path}: checkpoint format {state.get('format')!r}, expected {CHECKPOINT_FORMAT}")
+        state = read_checkpoint(path)
         if state["config"] != config_to_dict(self.config):
             raise ValueError(f"{path} was written by a different config than {self.run_dir / 'config.yaml'}")
         self.update, self.global_step = state["update"], state["global_step"]
         self.model.load_state_dict(state["model"])
-        self._refresh_rollout_model()
+        refresh_copy(self.rollout_model, self.model)
         self.optimizer.load_state_dict(state["optimizer"])
         rng = state["rng"]
         torch.set_rng_state(rng["torch"])
@@ -347,45 +350,21 @@ class Trainer:
         self.action_generator.set_state(rng["actions"])
         self.shuffle_rng.bit_generator.state = rng["shuffle"]
         self.episode_seed_rng.bit_generator.state = rng["episode_seeds"]
-        self._replay_episodes(state["env"]["seeds"], state["env"]["actions"])
-        if self._observation_digest() != state["env"]["observation_digest"]:
-            raise RuntimeError(
-                f"replaying the episodes of {path} did not reproduce the environment state: "
-                f"{self.config.env.id} is not deterministic given seed and actions, so the run cannot resume exactly"
-            )
-        rollout = state["rollout"]
-        self.memory_state = rollout["memory_state"].to(self.device)
-        self.previous_action = rollout["previous_action"].to(self.device)
-        self.previous_reward = rollout["previous_reward"].to(self.device)
+        self.actor.load_state(state["actor"], seed_source=self._episode_seeds)
         self.recent_returns = deque(state["recent_returns"], maxlen=RECENT_EPISODES)
-
-    def _replay_episodes(self, seeds: list[int], actions: list[np.ndarray]) -> None:
-        """Reset every slot with its episode's seed and step it through the episode's actions (in lockstep)."""
-        self.core.reset_slots(range(len(seeds)), seeds)
-        for slot, seed in enumerate(seeds):
-            self.episode_seeds[slot] = seed
-            self.episode_actions[slot] = list(actions[slot])
-        longest = max((len(a) for a in actions), default=0)
-        for t in range(longest):
-            slots = np.array([k for k, a in enumerate(actions) if len(a) > t], dtype=np.int64)
-            step_actions = np.stack([actions[k][t] for k in slots])
-            _, terminated, _ = self.core.step(self._env_actions(step_actions), idx=slots)
-            if terminated.any():
-                raise RuntimeError("an episode ended during checkpoint replay: the environment is not deterministic")
-        self.staging.load(self.core.observations())
-
-    def _observation_digest(self) -> str:
-        digest = hashlib.sha256()
-        for name in sorted(self.staging.current):
-            digest.update(self.staging.current[name].cpu().numpy().tobytes())
-        return digest.hexdigest()
+        # What a killed run wrote after this checkpoint is dropped, so the files hold what an uninterrupted run holds
+        training = self.run_dir / "training.csv"
+        self.training_rows = [r for r in _read_csv(training) if int(r["step"]) <= self.global_step]
+        evaluated = self.run_dir / "eval" / "episodes.csv"
+        if evaluated.is_file():
+            self.eval_records = [r for r in read_records(evaluated) if r["step"] <= self.global_step]
 
     # ------------------------------------------------------------------------------------------- run files
     def _write_run_files(self) -> None:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         config_path = self.run_dir / "config.yaml"
         if not config_path.exists():
-            atomic_write_bytes(config_path, dump_config(self.config).encode())
+            atomic_write_text(config_path, dump_config(self.config))
         info_path = self.run_dir / "run_info.json"
         info = json.loads(info_path.read_text()) if info_path.exists() else run_info(self.config)
         if self.update > 0:
@@ -394,51 +373,19 @@ class Trainer:
 
 
 # ----------------------------------------------------------------------------------------------- helpers
-class _HostStaging:
-    """The current observation of every worker, on the training device (``current``: name -> (workers, ...)).
-
-    On CUDA the numpy arrays go through pinned host tensors and asynchronous copies. Reusing a pinned tensor is
-    safe because every rollout step synchronises (the sampled actions come back to the host) before it is refilled.
-    """
-
-    KEYS = {"visual_observation": "image", "vector_observation": "vector"}
-
-    def __init__(self, buffer_inputs: dict[str, torch.Tensor], device: torch.device) -> None:
-        names = [name for name in ("image", "vector") if name in buffer_inputs]
-        self.current = {name: torch.zeros_like(buffer_inputs[name][:, 0]) for name in names}
-        self.pinned = None
-        if device.type == "cuda":
-            self.pinned = {name: torch.zeros_like(t, device="cpu").pin_memory() for name, t in self.current.items()}
-
-    def load(self, observations: np.ndarray | dict[str, np.ndarray]) -> None:
-        """Make the observations of all workers (as ``BatchedCore.observations()`` returns them) current."""
-        if isinstance(observations, np.ndarray):
-            observations = {"visual_observation": observations}
-        for key, array in observations.items():
-            name = self.KEYS[key]
-            target = self.current[name]
-            source = torch.from_numpy(array).reshape(target.shape)
-            if self.pinned is None:
-                target.copy_(source)
-            else:
-                self.pinned[name].copy_(source)
-                target.copy_(self.pinned[name], non_blocking=True)
+def _write_csv(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_text(path, text.getvalue())
 
 
-def _episode_metrics(finals: list[dict[str, Any]]) -> dict[str, float]:
-    """Mean return and length of the episodes that ended, plus every numeric metric the environment reports."""
-    if not finals:
-        return {}
-    metrics = {
-        "charts/episodic_return": float(np.mean([f["reward"] for f in finals])),
-        "charts/episodic_length": float(np.mean([f["length"] for f in finals])),
-        "charts/episodes": float(len(finals)),
-    }
-    keys = sorted({key for f in finals for key, value in f.items() if _is_numeric(value)} - {"reward", "length"})
-    for key in keys:
-        values = [float(f[key]) for f in finals if key in f and _is_numeric(f[key])]
-        metrics[f"env/{key}"] = float(np.mean(values))
-    return metrics
+def _read_csv(path: Path) -> list[dict[str, Any]]:
+    if not path.is_file():
+        return []
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
 
 
 def _is_numeric(value: Any) -> bool:
@@ -471,8 +418,9 @@ def _progress_bar(config: Config, initial: int) -> Any:
 def _summary_writer(run_dir: Path, step: int) -> Any:
     from torch.utils.tensorboard import SummaryWriter
 
-    # purge_step drops events a killed run logged after its last checkpoint, so curves stay single-valued
-    return SummaryWriter(log_dir=str(run_dir), purge_step=step if step > 0 else None)
+    # purge_step drops the events that a killed run logged after its last checkpoint (steps > step), so curves stay
+    # single-valued; the checkpoint's own step was logged before the checkpoint and stays.
+    return SummaryWriter(log_dir=str(run_dir), purge_step=step + 1 if step > 0 else None)
 
 
 # glibc's mallopt parameters (malloc.h) and their values here: blocks up to 32 MiB (the largest mmap threshold glibc
@@ -508,12 +456,6 @@ def _device(name: str) -> torch.device:
     if device.type == "cuda" and not torch.cuda.is_available():
         raise ValueError(f"run.device={name!r} but CUDA is not available here; use run.device=cpu")
     return device
-
-
-def latest_checkpoint(run_dir: str | Path) -> Path | None:
-    """The newest ``checkpoints/update_*.pt`` of a run directory, or None."""
-    paths = sorted((Path(run_dir) / "checkpoints").glob("update_*.pt"))
-    return paths[-1] if paths else None
 
 
 def run_info(config: Config) -> dict[str, Any]:

@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 from agents.config import Config, load_config  # noqa: E402
 from agents.io import git_revision, machine_info, versions, write_json_atomic  # noqa: E402
 from agents.models import log_probs_and_entropy  # noqa: E402
-from agents.ppo import filled_index, rows  # noqa: E402
+from agents.ppo import filled_index  # noqa: E402
 from agents.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
 from agents.trainer import Trainer  # noqa: E402
 
@@ -70,9 +70,8 @@ def end_to_end(trainer: Trainer, updates: int) -> float:
 def network_bound(trainer: Trainer) -> float:
     """Env steps per second if an update cost only the network's forward + backward passes over its minibatches."""
     config, buffer, model = trainer.config, trainer.buffer, trainer.model
-    length = None if config.ppo.sequence_length == "max" else int(config.ppo.sequence_length)
-    sequences = split_sequences(buffer.terminated_numpy(), 1 if config.model.memory == "none" else length)
-    inputs, states, actions = buffer.flat_inputs(), buffer.flat(buffer.memory_states), buffer.flat(buffer.actions)
+    sequences = split_sequences(buffer.terminated_numpy(), trainer.sequence_length)
+    states, actions = buffer.flat(buffer.memory_states), buffer.flat(buffer.actions)
     rng = np.random.default_rng(0)
     epochs = []
     for _ in range(config.ppo.epochs):
@@ -80,13 +79,13 @@ def network_bound(trainer: Trainer) -> float:
         for ids in minibatch_ids(len(sequences), config.ppo.minibatches, rng):
             batch = pad_sequences(sequences, ids, device=buffer.device)
             index = batch.step_index
-            gathered = {name: rows(tensor, filled_index(index)) for name, tensor in inputs.items()}
+            gathered = buffer.gather(filled_index(index))
             minibatches.append((gathered, states[batch.start_index], batch.mask, actions[index]))
         epochs.append(minibatches)
     started = time.perf_counter()
     for minibatches in epochs:
         for gathered, start_states, mask, minibatch_actions in minibatches:
-            with trainer._autocast():
+            with trainer.autocast():
                 logits, values = model.evaluate(gathered, start_states, mask)
             log_probs, entropy = log_probs_and_entropy(logits, minibatch_actions)
             (log_probs.mean() + entropy.mean() + values.square().mean()).backward()

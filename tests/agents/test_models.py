@@ -14,9 +14,9 @@ from agents.models import (
     ActorCritic,
     NatureCNN,
     RecurrentMemory,
+    choose_actions,
     log_probs_and_entropy,
     model_inputs,
-    sample_actions,
 )
 from agents.ppo import filled_index
 from agents.sequences import Sequences, pad_sequences, split_sequences
@@ -71,7 +71,7 @@ def test_output_shapes(memory: str) -> None:
     logits, values, next_state = model.step(_inputs(model, 5), state)
     assert [tuple(x.shape) for x in logits] == [(5, 3), (5, 3)] and values.shape == (5,)
     assert next_state.shape == state.shape
-    actions, log_probs = sample_actions(logits, torch.Generator().manual_seed(0))
+    actions, log_probs = choose_actions(logits, torch.Generator().manual_seed(0))
     assert actions.shape == (5, 2) and actions.dtype == torch.int64 and log_probs.shape == (5, 2)
     again, entropy = log_probs_and_entropy(logits, actions)
     torch.testing.assert_close(again, log_probs)
@@ -95,9 +95,13 @@ def test_initialisation_gains() -> None:
         assert_orthogonal(layer.weight, math.sqrt(2))
     assert_orthogonal(model.memory.rnn.weight_hh_l0, math.sqrt(2))
     assert_orthogonal(model.memory.rnn.weight_ih_l0, math.sqrt(2))
-    for name, param in model.named_parameters():
-        if name.endswith("bias") or "bias_" in name:
-            assert not param.any(), name
+    # as in the authors' code: recurrent biases start at zero, the others keep PyTorch's uniform(+-1/sqrt(fan_in))
+    for name in ("bias_ih_l0", "bias_hh_l0"):
+        assert not getattr(model.memory.rnn, name).any(), name
+    for name, module in model.named_modules():
+        if isinstance(module, torch.nn.Conv2d | torch.nn.Linear):
+            fan_in = module.weight[0].numel()
+            assert module.bias.any() and module.bias.abs().max() <= 1 / math.sqrt(fan_in), name
 
 
 def test_pixels_are_scaled_once_and_must_be_uint8() -> None:

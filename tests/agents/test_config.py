@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-import envs
 from agents.config import Config, ConfigError, Schedule, config_from_dict, config_to_dict, dump_config, load_config
 
-CONFIGS = sorted((Path(__file__).resolve().parent.parent / "configs").rglob("*.yaml"))
+CONFIG_ROOT = Path(__file__).resolve().parents[2] / "configs"
+CONFIGS = sorted(CONFIG_ROOT.rglob("*.yaml"))
 
 
 def test_defaults_are_table_6() -> None:
@@ -102,6 +102,53 @@ def test_overrides_are_parsed_as_yaml_and_validated() -> None:
             config_from_dict({}, [bad])
 
 
+@pytest.mark.parametrize("spelling", ["1e-3", "1.0e-3", "0.001", "1E-3"])
+def test_schedules_and_floats_accept_every_usual_spelling(spelling: str) -> None:
+    """A plain number is a constant schedule however it is spelt: YAML 1.1 reads ``1e-3`` (no dot) as a string."""
+    from_overrides = config_from_dict(
+        {}, [f"ppo.learning_rate={spelling}", f"ppo.entropy_coef={spelling}", f"ppo.value_coef={spelling}"]
+    )
+    from_yaml = load_config_text(
+        f"ppo: {{learning_rate: {spelling}, entropy_coef: {spelling}, value_coef: {spelling}}}"
+    )
+    for config in (from_overrides, from_yaml):
+        assert config.ppo.learning_rate == Schedule(1e-3) and config.ppo.entropy_coef == Schedule(1e-3)
+        assert config.ppo.value_coef == 1e-3
+    # a constant spelt as a string, then given a final value, decays from it
+    decaying = config_from_dict({"ppo": {"learning_rate": "1e-3"}}, ["ppo.learning_rate.final=1e-4"])
+    assert decaying.ppo.learning_rate == Schedule(1e-3, 1e-4)
+    with pytest.raises(ConfigError, match="ppo.learning_rate must be a mapping"):
+        config_from_dict({}, ["ppo.learning_rate=fast"])
+
+
+def load_config_text(text: str):
+    return config_from_dict(yaml.safe_load(text))
+
+
+def test_new_blocks_validate_and_name_the_method() -> None:
+    assert Config().method == "gru" and config_from_dict({"model": {"memory": "none"}}).method == "ppo"
+    assert config_from_dict({"model": {"memory": "none", "frame_stack": 4}}).method == "stack4"
+    assert config_from_dict({"model": {"memory": "none", "helm": {"lm": "random"}}}).method == "helm"
+    assert config_from_dict({"run": {"method": "mine", "task": "mmact"}}).method == "mine"
+    assert Config().task == "ProofOfMemory-v0"
+    assert Config().eval_seeds == [100_000, 100_029]  # the paper's 30 novel seeds after the 100,000 training seeds
+    assert config_from_dict({"env": {"train_seeds": [0, 9]}}).eval_seeds == [10, 39]
+    for raw, message in [
+        (
+            {"eval": {"seeds": [5, 7]}},
+            "evaluation seeds [5, 7] overlap the training seeds (env.train_seeds) [0, 99999]",
+        ),
+        ({"eval": {"seeds": [7]}}, "eval.seeds=[7] is invalid: expected [low, high]"),
+        ({"model": {"frame_stack": 0}}, "model.frame_stack=0 is invalid"),
+        ({"model": {"encoder": "impala"}}, "model.encoder='impala' is invalid; valid choices: nature_cnn"),
+        ({"model": {"helm": {"random_width": 30, "random_heads": 4}}}, "expected a multiple of"),
+        ({"env": {"frame_skip": 0}}, "env.frame_skip=0 is invalid"),
+    ]:
+        with pytest.raises(ConfigError) as err:
+            config_from_dict(raw)
+        assert message in str(err.value)
+
+
 def test_partial_blocks_keep_the_field_defaults() -> None:
     config = config_from_dict({"ppo": {"learning_rate": {"final": 0.0}}, "run": {"seed": 3}})
     assert config.ppo.learning_rate == Schedule(3e-4, 0.0, None)
@@ -131,17 +178,14 @@ def test_missing_file_and_non_mapping(tmp_path: Path) -> None:
         load_config(tmp_path / "list.yaml")
 
 
-@pytest.mark.parametrize("path", CONFIGS, ids=[str(p.relative_to(p.parents[1])) for p in CONFIGS])
+@pytest.mark.parametrize("path", CONFIGS, ids=[str(p.relative_to(CONFIG_ROOT)) for p in CONFIGS])
 def test_shipped_configs_load(path: Path) -> None:
-    env_id = (yaml.safe_load(path.read_text()).get("env") or {}).get("id", "ProofOfMemory-v0")
-    if env_id not in envs.ENV_IDS:
-        pytest.skip(f"{env_id} is not implemented on this branch yet")
     config = load_config(path)
     assert config.num_updates >= 1
 
 
 def test_mortar_mayhem_b_grid_configs_are_table_6() -> None:
-    root = Path(__file__).resolve().parent.parent / "configs" / "mortar_mayhem_b_grid"
+    root = Path(__file__).resolve().parents[2] / "configs" / "mortar_mayhem_b_grid"
     for name, memory in (("gru", "gru"), ("ppo", "none")):
         raw = yaml.safe_load((root / f"{name}.yaml").read_text())
         assert raw["env"]["id"] == "MortarMayhemB-Grid-v0"

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import platform
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -13,10 +15,11 @@ import torch
 import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+from agents.checkpoint import latest_checkpoint
 from agents.config import config_from_dict, load_config
-from agents.models import log_probs_and_entropy
+from agents.models import log_probs_and_entropy, one_hot_actions
 from agents.sequences import pad_sequences, split_sequences
-from agents.trainer import Trainer, TrainingDiverged, latest_checkpoint
+from agents.trainer import Trainer, TrainingDiverged
 from scripts import train as train_script
 from tests.dict_env import DictCore
 
@@ -24,7 +27,14 @@ TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
     "model": {"memory": "gru", "memory_size": 16, "hidden_size": 16, "vector_encoder_size": 8},
     "ppo": {"epochs": 2, "minibatches": 2, "learning_rate": {"initial": 1.0e-3, "final": 1.0e-4}},
-    "run": {"total_steps": 4 * 16 * 6, "workers": 4, "worker_steps": 16, "seed": 3, "progress_bar": False},
+    "run": {
+        "total_steps": 4 * 16 * 6,
+        "workers": 4,
+        "worker_steps": 16,
+        "seed": 3,
+        "progress_bar": False,
+        "torch_threads": 1,  # the same numbers on any machine, and no OpenMP stalls when the cores are busy
+    },
 }
 
 
@@ -56,11 +66,15 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         ("model.memory=lstm", "ppo.sequence_length=3"),
         ("model.memory=none", "model.previous_action=true", "model.previous_reward=true"),
         ("model.memory=gru", "run.precision=bf16"),
+        ("model.memory=none", "model.frame_stack=4", "model.grayscale=true", "env.frame_skip=2"),
     ],
-    ids=["gru-max", "lstm-3", "none", "gru-bf16"],
+    ids=["gru-max", "lstm-3", "none", "gru-bf16", "stack4-gray-skip2"],
 )
 def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overrides: tuple[str, ...]) -> None:
-    config = _config(*overrides, "run.checkpoint_interval=2")
+    """Killed after update 5 with checkpoints every 2: the resumed run ends with the same weights, TensorBoard
+    points, training log and evaluation records as an uninterrupted one (nothing of update 5 survives twice)."""
+    evaluation = ("eval.interval=3", "eval.seeds=[100000, 100002]", "eval.repetitions=2")
+    config = _config(*overrides, *evaluation, "run.checkpoint_interval=2")
     uninterrupted = Trainer(config, tmp_path / "a")
     uninterrupted.train()
 
@@ -69,6 +83,7 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overri
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     assert latest_checkpoint(tmp_path / "b").name == "update_0000004.pt"
+    _next_second()  # event files are named by time, then by a per-process counter: keep the resumed one after
     resumed = Trainer.resume(tmp_path / "b")
     assert resumed.update == 4 and resumed.global_step == 4 * 64
     resumed.train()
@@ -76,6 +91,33 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overri
     _assert_same_weights(uninterrupted, resumed)
     info = json.loads((tmp_path / "b" / "run_info.json").read_text())
     assert [r["update"] for r in info["resumed"]] == [4]
+    for name in ("training.csv", "eval/episodes.csv"):
+        assert _rows(tmp_path / "a" / name) == _rows(tmp_path / "b" / name), name
+    uninterrupted_events, resumed_events = _scalars(tmp_path / "a"), _scalars(tmp_path / "b")
+    assert set(uninterrupted_events) == set(resumed_events)
+    for tag, points in uninterrupted_events.items():
+        assert [step for step, _ in resumed_events[tag]] == [step for step, _ in points], tag
+        if "SPS" not in tag:
+            assert [value for _, value in resumed_events[tag]] == pytest.approx([value for _, value in points]), tag
+    assert [step for step, _ in uninterrupted_events["charts/learning_rate"]] == [64 * u for u in range(1, 7)]
+    assert [step for step, _ in uninterrupted_events["eval/metric"]] == [64 * 3, 64 * 6]
+
+
+def _next_second() -> None:
+    time.sleep(1.0 - time.time() % 1.0 + 0.01)
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    """A CSV's rows without the run column (the run directory's name)."""
+    with open(path, newline="") as handle:
+        return [{k: v for k, v in row.items() if k != "run"} for row in csv.DictReader(handle)]
+
+
+def _scalars(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
+    """Every scalar of a run directory's event files (all of them, a resumed run's too): tag -> (step, value)."""
+    events = EventAccumulator(str(run_dir))
+    events.Reload()
+    return {tag: [(e.step, e.value) for e in events.Scalars(tag)] for tag in events.Tags()["scalars"]}
 
 
 def test_resume_with_dict_observations_and_multidiscrete_actions(tmp_path: Path, dict_env: str) -> None:
@@ -134,10 +176,13 @@ def test_rollout_bookkeeping(tmp_path: Path, dict_env: str) -> None:
     starts = torch.zeros_like(done)
     starts[:, 1:] = done[:, :-1]
     assert not buffer.memory_states[starts].any()
-    assert not buffer.inputs["previous_action"][starts].any() and not buffer.inputs["previous_reward"][starts].any()
+    # an episode's first step has no previous action (-1, an all-zero one-hot, as in the authors' code) and reward 0
+    assert (buffer.inputs["previous_action"][starts] == -1).all() and not buffer.inputs["previous_reward"][starts].any()
+    one_hot = one_hot_actions(buffer.inputs["previous_action"][starts], trainer.model.action_dims)
+    assert one_hot.shape[-1] == sum(trainer.model.action_dims) and not one_hot.any()
     continuing = ~starts
     continuing[:, 0] = False
-    prev_action = torch.zeros_like(buffer.actions)
+    prev_action = torch.full_like(buffer.actions, -1)
     prev_action[:, 1:] = buffer.actions[:, :-1]
     assert torch.equal(buffer.inputs["previous_action"][continuing], prev_action[continuing])
     assert buffer.memory_states[continuing].abs().sum(-1).gt(0).all()
@@ -145,7 +190,7 @@ def test_rollout_bookkeeping(tmp_path: Path, dict_env: str) -> None:
     for max_length in (None, 5):
         sequences = split_sequences(done.numpy(), max_length)
         batch = pad_sequences(sequences, np.arange(len(sequences)))
-        inputs = {name: buffer.flat(t)[batch.step_index] for name, t in buffer.inputs.items()}
+        inputs = buffer.gather(batch.step_index)
         with torch.no_grad():
             logits, values = trainer.model.evaluate(
                 inputs, buffer.flat(buffer.memory_states)[batch.start_index], batch.mask
@@ -245,8 +290,8 @@ def test_bf16_acts_with_a_bfloat16_copy_of_the_weights(tmp_path: Path, dict_env:
     buffer = trainer.buffer
     sequences = split_sequences(buffer.terminated.numpy(), None)
     batch = pad_sequences(sequences, np.arange(len(sequences)))
-    inputs = {name: buffer.flat(t)[batch.step_index] for name, t in buffer.inputs.items()}
-    with torch.no_grad(), trainer._autocast():
+    inputs = buffer.gather(batch.step_index)
+    with torch.no_grad(), trainer.autocast():
         logits, values = trainer.model.evaluate(
             inputs, buffer.flat(buffer.memory_states)[batch.start_index], batch.mask
         )

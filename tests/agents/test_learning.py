@@ -14,7 +14,7 @@ import pytest
 from agents.config import load_config
 from agents.trainer import Trainer
 
-CONFIGS = Path(__file__).resolve().parent.parent / "configs" / "proof_of_memory"
+CONFIGS = Path(__file__).resolve().parents[2] / "configs" / "proof_of_memory"
 
 
 def _success(history: list[dict[str, float]], last: int) -> float:

@@ -1,0 +1,324 @@
+"""Scoring a policy on novel seeds: every seed x repetition played at once in one batched core, through the actor.
+
+Slot ``i`` plays seed ``seeds[i // repetitions]``; repetitions of a seed differ only by the sampled actions (the
+paper samples; ``greedy`` takes the argmax). Each finished episode becomes one record (:data:`RECORD_COLUMNS`, then
+the environment's own end-of-episode metrics). The trainer calls :func:`evaluate` during training and
+``scripts/evaluate.py`` calls it on saved checkpoints: with the same weights, seeds and sampling seed both give the
+same records.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+import envs
+from agents.actor import Actor
+from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
+from agents.config import Config, check_disjoint_seeds
+from agents.io import atomic_write_bytes, atomic_write_text, provenance, write_json_atomic
+from agents.metrics import metric_of
+from agents.models import ActorCritic
+
+RECORD_COLUMNS = [
+    "run",
+    "method",
+    "task",
+    "env_id",
+    "step",
+    "seed",
+    "repetition",
+    "return",
+    "length",
+    "metric",
+    "metric_reference",
+]
+FrameHook = Callable[[Actor], None]  # called with the actor once before the first decision and after every decision
+
+
+def evaluate(
+    model: ActorCritic,
+    helm: Any,
+    config: Config,
+    seeds: Sequence[int],
+    repetitions: int,
+    *,
+    greedy: bool = False,
+    sampling_seed: int = 0,
+    step: int = 0,
+    run: str = "",
+    device: torch.device | str = "cpu",
+    progress: bool = False,
+    on_frame: FrameHook | None = None,
+    core: Any = None,
+) -> list[dict[str, Any]]:
+    """Play ``repetitions`` episodes of every seed with ``model`` and return one record per episode, ordered by
+    seed then repetition. ``core``: a batched core with ``len(seeds) * repetitions`` slots to reuse."""
+    slots = len(seeds) * repetitions
+    if core is None:
+        core = envs.make_core(config.env.id, slots, config.env.options)
+    elif core.num_envs != slots:
+        raise ValueError(f"the core has {core.num_envs} slots, the evaluation needs {slots}")
+    generator = torch.Generator(device=device)
+    generator.manual_seed(sampling_seed)
+    actor = Actor(core, model, config, generator, helm, device)
+    slot_seeds = [int(seed) for seed in seeds for _ in range(repetitions)]
+    actor.start(slot_seeds)
+    finals: dict[int, dict[str, Any]] = {}
+    bar = _progress(slots, progress)
+    if on_frame is not None:
+        on_frame(actor)
+    while actor.active.any():
+        outcome = actor.advance(actor.decide(greedy))
+        finals.update(outcome.finals)
+        if bar is not None and outcome.finals:
+            bar.update(len(outcome.finals))
+        if on_frame is not None:
+            on_frame(actor)
+    if bar is not None:
+        bar.close()
+    metric = metric_of(config.env.id)
+    records = []
+    for slot in range(slots):
+        info = finals[slot]
+        extra = {key: _number(value) for key, value in sorted(info.items()) if key not in ("reward", "length")}
+        records.append(
+            {
+                "run": run,
+                "method": config.method,
+                "task": config.task,
+                "env_id": config.env.id,
+                "step": step,
+                "seed": slot_seeds[slot],
+                "repetition": slot % repetitions,
+                "return": float(info["reward"]),
+                "length": int(info["length"]),
+                "metric": float(metric.value(info)),
+                "metric_reference": float(metric.reference(info)),
+                **{key: value for key, value in extra.items() if _is_number(value)},
+            }
+        )
+    return records
+
+
+def seed_list(seeds: Sequence[int]) -> list[int]:
+    """An inclusive [low, high] range as the list of its seeds."""
+    low, high = seeds
+    return list(range(int(low), int(high) + 1))
+
+
+def record_means(records: Iterable[dict[str, Any]]) -> dict[str, float]:
+    """Mean of every numeric column of some records (return, length, metric, the environment's metrics)."""
+    records = list(records)
+    skip = {"step", "seed", "repetition"}
+    keys = sorted({k for r in records for k, v in r.items() if _is_number(v)} - skip)
+    return {key: float(np.mean([float(r[key]) for r in records if _is_number(r.get(key))])) for key in keys}
+
+
+def write_records(path: str | Path, records: Sequence[dict[str, Any]]) -> None:
+    """Write records as CSV atomically: :data:`RECORD_COLUMNS` first, then every other key in sorted order."""
+    extra = sorted({key for record in records for key in record} - set(RECORD_COLUMNS))
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=RECORD_COLUMNS + extra, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(records)
+    atomic_write_text(path, text.getvalue())
+
+
+def read_records(path: str | Path) -> list[dict[str, Any]]:
+    """Records written by :func:`write_records`, numbers parsed (empty cells dropped)."""
+    with open(path, newline="") as handle:
+        return [{k: _parse(v) for k, v in row.items() if v != ""} for row in csv.DictReader(handle)]
+
+
+def _parse(text: str) -> Any:
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            continue
+    return text
+
+
+def _number(value: Any) -> Any:
+    """Booleans as 0/1 (the environments report some flags as bools, others as ints)."""
+    return int(value) if isinstance(value, bool | np.bool_) else value
+
+
+def _is_number(value: Any) -> bool:
+    return (
+        isinstance(value, int | float | np.integer | np.floating)
+        and not isinstance(value, bool)
+        and (not isinstance(value, float) or math.isfinite(value))
+    )
+
+
+def _progress(total: int, enabled: bool) -> Any:
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="episode", dynamic_ncols=True, leave=False)
+
+
+# --------------------------------------------------------------------------------------- evaluating run directories
+def parse_seed_range(text: str) -> list[int]:
+    """``LOW:HIGH`` (HIGH excluded, as a Python range) -> the inclusive [low, high] of those seeds."""
+    low, sep, high = text.partition(":")
+    try:
+        first, end = int(low), int(high)
+    except ValueError:
+        first = end = -1
+    if not sep or first < 0 or end <= first:
+        raise ValueError(f"--seeds {text!r} is invalid: expected LOW:HIGH with 0 <= LOW < HIGH, e.g. 100000:100030")
+    return [first, end - 1]
+
+
+def select_checkpoints(run_dir: Path, which: str, batch_size: int) -> list[Path]:
+    """``last``, ``all`` or a comma-separated list of environment steps -> checkpoint paths of ``run_dir``."""
+    available = list_checkpoints(run_dir)
+    if not available:
+        raise FileNotFoundError(f"{run_dir} holds no checkpoint (checkpoints/update_*.pt)")
+    if which == "last":
+        return available[-1:]
+    if which == "all":
+        return available
+    by_step = {checkpoint_update(path) * batch_size: path for path in available}
+    chosen = []
+    for item in which.split(","):
+        try:
+            step = int(item)
+        except ValueError:
+            raise ValueError(f"--checkpoints {which!r} is invalid: expected last, all or STEP,STEP,...") from None
+        if step not in by_step:
+            raise ValueError(
+                f"{run_dir} has no checkpoint at step {step}; its checkpoints are at steps {sorted(by_step)}"
+            )
+        chosen.append(by_step[step])
+    return chosen
+
+
+def evaluate_runs(
+    run_dirs: Sequence[Path],
+    out: Path,
+    *,
+    seeds: str | None = None,
+    repetitions: int | None = None,
+    checkpoints: str = "last",
+    greedy: bool = False,
+    sampling_seed: int | None = None,
+    method: str | None = None,
+    task: str | None = None,
+    video: Path | None = None,
+    videos: int = 3,
+    device: str = "cpu",
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Evaluate checkpoints of several runs on novel seeds; write ``out/episodes.csv`` and ``out/summary.json``
+    (atomically) and return the summary. Defaults come from each run's own ``eval`` block."""
+    records: list[dict[str, Any]] = []
+    for run_dir in run_dirs:
+        config = run_config(run_dir)
+        seed_range = parse_seed_range(seeds) if seeds else config.eval_seeds
+        check_disjoint_seeds(config.env.train_seeds, seed_range)
+        reps = repetitions or config.eval.repetitions
+        for path in select_checkpoints(run_dir, checkpoints, config.batch_size):
+            policy = load_policy(run_dir, path, device)
+            recorder = EpisodeVideo(min(videos, reps * (seed_range[1] - seed_range[0] + 1))) if video else None
+            found = evaluate(
+                policy.model,
+                policy.helm,
+                policy.config,
+                seed_list(seed_range),
+                reps,
+                greedy=greedy,
+                sampling_seed=config.eval.seed if sampling_seed is None else sampling_seed,
+                step=policy.step,
+                run=run_dir.name,
+                device=device,
+                progress=progress,
+                on_frame=recorder,
+            )
+            for record in found:
+                record["method"] = method or record["method"]
+                record["task"] = task or record["task"]
+            records.extend(found)
+            if recorder is not None and video is not None:
+                recorder.write(video, f"{run_dir.name}-step{policy.step}", found)
+    summary = summarize(records)
+    summary["evaluation"] = {
+        "runs": [str(run) for run in run_dirs],
+        "seeds": seeds,
+        "repetitions": repetitions,
+        "checkpoints": checkpoints,
+        "greedy": greedy,
+        **provenance(),
+    }
+    write_records(out / "episodes.csv", records)
+    write_json_atomic(out / "summary.json", summary, sort_keys=False)
+    return summary
+
+
+class EpisodeVideo:
+    """Frames of the first ``episodes`` slots of an evaluation: the agent's view (upscaled) beside the ground-truth
+    debug view, while the slot plays; written as one GIF per episode."""
+
+    def __init__(self, episodes: int) -> None:
+        self.episodes = episodes
+        self.frames: list[list[np.ndarray]] = [[] for _ in range(episodes)]
+        self.ended = [False] * episodes
+
+    def __call__(self, actor: Actor) -> None:
+        core = actor.core
+        for slot in range(self.episodes):
+            if not self.ended[slot]:  # every frame while the slot plays, its last one included
+                self.ended[slot] = not actor.active[slot]
+                agent = core.agent_frame(slot)
+                debug = core.debug_frame(slot)
+                scale = debug.shape[0] // agent.shape[0]
+                agent = np.repeat(np.repeat(agent, scale, axis=0), scale, axis=1)
+                self.frames[slot].append(np.concatenate((agent, debug), axis=1))
+
+    def write(self, directory: Path, name: str, records: Sequence[dict[str, Any]]) -> list[Path]:
+        from PIL import Image
+
+        paths = []
+        for slot, frames in enumerate(self.frames):
+            if not frames:
+                continue
+            record = records[slot]
+            path = directory / f"{name}-seed{record['seed']}-rep{record['repetition']}.gif"
+            images = [Image.fromarray(frame) for frame in frames]
+            data = io.BytesIO()
+            images[0].save(data, format="GIF", save_all=True, append_images=images[1:], duration=80, loop=0)
+            atomic_write_bytes(path, data.getvalue())
+            paths.append(path)
+        return paths
+
+
+def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Per run and checkpoint: episodes, mean return and length, mean metric (the paper's) and its reference figure."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for record in records:
+        groups.setdefault((record["run"], record["method"], record["task"], record["step"]), []).append(record)
+    runs = []
+    for (run, method, task, step), group in groups.items():
+        runs.append(
+            {
+                "run": run,
+                "method": method,
+                "task": task,
+                "step": step,
+                "episodes": len(group),
+                **{key: float(np.mean([r[key] for r in group])) for key in ("return", "length", "metric")},
+                "metric_reference": float(np.mean([r["metric_reference"] for r in group])),
+            }
+        )
+    return {"runs": runs}

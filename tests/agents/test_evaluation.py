@@ -1,0 +1,101 @@
+"""Evaluation on novel seeds: records, seeds, checkpoints, in-training evaluation == scripts/evaluate.py, videos."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from PIL import Image
+
+from agents.config import config_from_dict
+from agents.evaluation import RECORD_COLUMNS, parse_seed_range, read_records
+from agents.trainer import Trainer
+from scripts import evaluate as evaluate_script
+
+TINY = {
+    "env": {"id": "ProofOfMemory-v0", "options": {"delay": 2}, "train_seeds": [0, 999]},
+    "model": {"memory": "gru", "memory_size": 8, "hidden_size": 8},
+    "ppo": {"epochs": 1, "minibatches": 2},
+    "run": {
+        "total_steps": 4 * 8 * 4,
+        "workers": 4,
+        "worker_steps": 8,
+        "seed": 1,
+        "progress_bar": False,
+        "torch_threads": 1,
+        "checkpoint_interval": 2,
+        "keep_checkpoints": 0,
+    },
+    "eval": {"interval": 2, "seeds": [1000, 1003], "repetitions": 3, "seed": 7},
+}
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    directory = tmp_path_factory.mktemp("runs") / "tiny-seed1"
+    Trainer(config_from_dict(TINY), directory).train()
+    return directory
+
+
+def test_in_training_records_equal_scripts_evaluate_on_the_same_checkpoints(run_dir: Path, tmp_path: Path) -> None:
+    """Every checkpoint x seed x repetition once, seeds disjoint from training, and the in-training evaluation gives
+    the very records that scripts/evaluate.py gives for the same checkpoint, seeds and sampling seed."""
+    out = tmp_path / "evaluation"
+    code = evaluate_script.main(["--run", str(run_dir), "--checkpoints", "all", "--out", str(out), "--no-progress"])
+    assert code == 0
+    records = read_records(out / "episodes.csv")
+    assert len(records) == 2 * 4 * 3  # checkpoints x seeds x repetitions
+    assert list(records[0])[: len(RECORD_COLUMNS)] == RECORD_COLUMNS and "success" in records[0]
+    assert {(r["step"], r["seed"], r["repetition"]) for r in records} == {
+        (step, seed, rep) for step in (64, 128) for seed in range(1000, 1004) for rep in range(3)
+    }
+    assert all(r["seed"] > TINY["env"]["train_seeds"][1] for r in records)
+    assert {r["run"] for r in records} == {"tiny-seed1"} and {r["method"] for r in records} == {"gru"}
+    assert all(r["metric"] == r["success"] == r["metric_reference"] for r in records)
+    assert read_records(run_dir / "eval" / "episodes.csv") == records
+    summary = json.loads((out / "summary.json").read_text())
+    assert [(row["step"], row["episodes"]) for row in summary["runs"]] == [(64, 12), (128, 12)]
+    assert summary["evaluation"]["git"]["revision"]
+
+
+def test_default_seeds_overlap_error_and_checkpoint_choice(run_dir: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "e"
+    assert evaluate_script.main(["--run", str(run_dir), "--seeds", "990:1002", "--out", str(out)]) == 2
+    assert "seeds [990, 1001] overlap the training seeds (env.train_seeds) [0, 999]" in capsys.readouterr().err
+    assert not out.exists()  # nothing half-written
+    assert evaluate_script.main(["--run", str(run_dir), "--checkpoints", "100", "--out", str(out)]) == 2
+    assert "no checkpoint at step 100; its checkpoints are at steps [64, 128]" in capsys.readouterr().err
+    args = ["--run", str(run_dir), "--checkpoints", "64", "--seeds", "2000:2002", "--repetitions", "2"]
+    assert evaluate_script.main([*args, "--greedy", "--method", "mine", "--out", str(out), "--no-progress"]) == 0
+    records = read_records(out / "episodes.csv")
+    assert [(r["step"], r["seed"], r["repetition"]) for r in records] == [
+        (64, 2000, 0),
+        (64, 2000, 1),
+        (64, 2001, 0),
+        (64, 2001, 1),
+    ]
+    assert {r["method"] for r in records} == {"mine"}
+    # greedy play of the same level is the same episode every time
+    assert records[0]["return"] == records[1]["return"] and records[2]["length"] == records[3]["length"]
+    with pytest.raises(ValueError, match="LOW:HIGH"):
+        parse_seed_range("5-9")
+
+
+def test_videos_show_the_agent_view_beside_the_ground_truth(run_dir: Path, tmp_path: Path) -> None:
+    video = tmp_path / "video"
+    args = ["--run", str(run_dir), "--out", str(tmp_path / "e"), "--video", str(video), "--videos", "2"]
+    assert evaluate_script.main([*args, "--no-progress"]) == 0
+    gifs = sorted(video.glob("*.gif"))
+    assert [g.name for g in gifs] == ["tiny-seed1-step128-seed1000-rep0.gif", "tiny-seed1-step128-seed1000-rep1.gif"]
+    with Image.open(gifs[0]) as gif:
+        assert gif.size == (2 * 144, 144)  # 36x36 agent view upscaled 4x beside the 144x144 ground truth
+
+
+def test_a_run_without_its_config_is_refused(tmp_path: Path, capsys) -> None:
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(TINY))
+    assert evaluate_script.main(["--run", str(tmp_path / "missing")]) == 2
+    assert "is not a run directory" in capsys.readouterr().err
+    assert evaluate_script.main(["--run", str(tmp_path)]) == 2
+    assert "holds no checkpoint" in capsys.readouterr().err
