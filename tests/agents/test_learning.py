@@ -38,3 +38,19 @@ def test_memoryless_ppo_stays_at_chance_on_proof_of_memory(tmp_path: Path) -> No
     assert config.model.memory == "none" and not config.model.previous_action  # no memory, not even via actions
     history = Trainer(config, tmp_path).train()
     assert 0.35 <= _success(history, last=8) <= 0.65
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("config_name", "delay", "solves"), [("stack4", 3, True), ("stack4", 8, False), ("stack16", 8, True)]
+)
+def test_frame_stacks_bridge_exactly_their_window(tmp_path: Path, config_name: str, delay: int, solves: bool) -> None:
+    """A k-stack sees the cue at the query only when the cue is fewer than k steps back: 4 frames solve delay 3 and
+    stay at chance at delay 8, which 16 (grayscale) frames solve."""
+    config = load_config(CONFIGS / f"{config_name}.yaml", ["run.progress_bar=false", f"env.options.delay={delay}"])
+    assert config.model.memory == "none"
+    history = Trainer(config, tmp_path).train()
+    if solves:
+        assert _success(history, last=4) >= 0.95
+    else:
+        assert 0.35 <= _success(history, last=8) <= 0.65
