@@ -3,6 +3,9 @@
 Every episode of a trace file is replayed on one environment instance in file order (a fresh instance where the
 trace says ``fresh_env``), with the recorded seed, options and actions. Each step is compared on the observation
 digest, reward, terminated/truncated flags and info.
+
+Runs with the project's python (it imports ``envs``), never inside the reference venv. Used by
+``scripts/parity_report.py`` and ``tests/reference/test_parity.py``.
 """
 
 from __future__ import annotations
@@ -17,11 +20,8 @@ import gymnasium as gym
 import numpy as np
 
 import envs  # registers the ids; make_core for the batched replay
-from scripts.reference_traces import ALL_IDS
-from scripts.trace_format import load_traces, obs_digest
-
-TRACE_ROOT = Path(__file__).parent / "data" / "traces"
-REFERENCE_IDS = ALL_IDS  # the ids with recorded traces: every Memory Gym id
+from scripts.reference import TRACES_DIR
+from scripts.reference.trace_format import load_traces, obs_digest
 
 
 @dataclass
@@ -61,7 +61,7 @@ def jsonable(value: Any) -> Any:
     return value
 
 
-def replay(env_id: str, root: Path = TRACE_ROOT, max_mismatches: int = 5) -> ParityResult:
+def replay(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5) -> ParityResult:
     """Replay every episode of ``env_id``'s trace file and count identical steps."""
     trace = load_traces(env_id, root)
     result = ParityResult(env_id)
@@ -99,7 +99,7 @@ def replay(env_id: str, root: Path = TRACE_ROOT, max_mismatches: int = 5) -> Par
     return result
 
 
-def replay_batched(env_id: str, root: Path = TRACE_ROOT, max_mismatches: int = 5) -> ParityResult:
+def replay_batched(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5) -> ParityResult:
     """Replay the seeded trace episodes each in its own slot of ONE batched core, stepping the live slots together.
 
     This checks the vectorised step against the reference (the single-env face may take per-slot fast paths). The

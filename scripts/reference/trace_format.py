@@ -1,7 +1,7 @@
-"""Shared trace format for the reference traces (numpy + stdlib only, no memory_gym).
+"""The format of the reference traces: observation digests and the deterministic gzip JSON files.
 
-Imported by the recorder (inside the isolated reference venv) and by the replay tests (project env), so both sides
-compute observation digests in exactly the same way.
+Imported by the recorder (inside the isolated reference venv) and by the parity comparison (project venv), so both
+sides compute observation digests in exactly the same way. Standard library, numpy and ``agents.io`` only.
 
 Digest convention: ``image_digest`` hashes an ordinary (row, column, channel) uint8 image. The reference package
 returns its observation as obs[x][y][c]; the recorder transposes it with ``obs.transpose(1, 0, 2)`` before hashing.
@@ -18,9 +18,8 @@ from typing import Any
 
 import numpy as np
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-TRACES_DIR = REPO_ROOT / "tests" / "data" / "traces"
-MP_PATHS_FILE = REPO_ROOT / "tests" / "data" / "mp_paths.json.gz"
+from agents.io import atomic_write_bytes
+from scripts.reference import MP_PATHS_FILE, TRACES_DIR
 
 DIGEST_METHOD = (
     "sha256 hex, first 16 chars, of np.ascontiguousarray(obs.transpose(1,0,2)).tobytes() (uint8); "
@@ -71,10 +70,10 @@ def to_jsonable(value: Any) -> Any:
 
 
 def dump_json_gz(obj: Any, path: Path) -> None:
-    """Write ``obj`` as deterministic gzip-compressed JSON (sorted keys, no timestamp, no file name in the header)."""
+    """Write ``obj`` as deterministic gzip-compressed JSON (sorted keys, no timestamp, no file name in the header),
+    atomically."""
     data = json.dumps(obj, sort_keys=True, separators=(",", ":")).encode()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(gzip.compress(data, compresslevel=9, mtime=0))
+    atomic_write_bytes(path, gzip.compress(data, compresslevel=9, mtime=0))
 
 
 def load_json_gz(path: Path) -> Any:
