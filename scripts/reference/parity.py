@@ -2,7 +2,8 @@
 
 Every episode of a trace file is replayed on one environment instance in file order (a fresh instance where the
 trace says ``fresh_env``), with the recorded seed, options and actions. Each step is compared on the observation
-digest, reward, terminated/truncated flags and info.
+digest, reward, terminated/truncated flags and info. Info keys that our core declares in its ``added_info_keys``
+(keys that memory-gym does not have) are left out of the comparison.
 
 Runs with the project's python (it imports ``envs``), never inside the reference venv. Used by
 ``scripts/parity_report.py`` and ``tests/reference/test_parity.py``.
@@ -61,6 +62,16 @@ def jsonable(value: Any) -> Any:
     return value
 
 
+def added_info_keys(core: Any) -> frozenset[str]:
+    """The info keys that ``core`` adds beyond the reference's (declared by the core class; none by default)."""
+    return frozenset(getattr(core, "added_info_keys", frozenset()))
+
+
+def reference_info(info: dict[str, Any], added: frozenset[str]) -> Any:
+    """One of our infos as the trace stores the reference's: without the ``added`` keys, as plain python values."""
+    return jsonable({key: value for key, value in info.items() if key not in added})
+
+
 def replay(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5) -> ParityResult:
     """Replay every episode of ``env_id``'s trace file and count identical steps."""
     trace = load_traces(env_id, root)
@@ -70,12 +81,13 @@ def replay(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5) -> Par
         if env is None or episode.get("fresh_env"):
             env = gym.make(env_id, disable_env_checker=True)
         result.episodes += 1
+        added = added_info_keys(env.unwrapped.core)
         obs, info = env.reset(seed=episode["seed"], options=episode["options"])
-        frames = [(obs_digest(obs), None, None, None, jsonable(info))]
+        frames = [(obs_digest(obs), None, None, None, reference_info(info, added))]
         expected = [(episode["reset_obs"], None, None, None, episode["reset_info"])]
         for t, action in enumerate(episode["actions"]):
             obs, reward, terminated, truncated, info = env.step(action)
-            frames.append((obs_digest(obs), reward, terminated, truncated, jsonable(info)))
+            frames.append((obs_digest(obs), reward, terminated, truncated, reference_info(info, added)))
             expected.append(
                 (
                     episode["obs"][t],
@@ -115,6 +127,7 @@ def replay_batched(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5
         if ep["seed"] is not None and (i == 0 or ep.get("fresh_env") or trace[i - 1]["seed"] is not None)
     ]
     core = envs.make_core(env_id, num_envs=len(chosen))
+    added = added_info_keys(core)
     episodes = [ep for _, ep in chosen]
     result = ParityResult(env_id, episodes=len(episodes))
 
@@ -157,7 +170,7 @@ def replay_batched(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5
             ep = episodes[k]
             info = core.step_info(k)
             info.update(finals.get(k, {}))
-            got = (obs_digest(frames[i]), float(rewards[i]), bool(terminated[i]), jsonable(info))
+            got = (obs_digest(frames[i]), float(rewards[i]), bool(terminated[i]), reference_info(info, added))
             want = (ep["obs"][t], ep["rewards"][t], ep["terminated"][t], ep["infos"][t])
             check(ep["name"], t + 1, got, want)
     return result

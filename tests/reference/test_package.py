@@ -1,4 +1,4 @@
-"""The reference package's boundaries: its ids and what each side may import."""
+"""The reference package's boundaries: its ids, what each side may import, and the info keys left out of parity."""
 
 from __future__ import annotations
 
@@ -8,8 +8,11 @@ from pathlib import Path
 
 import pytest
 
+import envs
 from envs import ENV_IDS
 from scripts.reference import PROJECT_ONLY_IDS, REFERENCE_IDS
+from scripts.reference.parity import replay, replay_batched
+from scripts.reference.trace_format import dump_json_gz, load_traces
 
 ROOT = Path(__file__).resolve().parents[2]
 # What runs inside the reference venv (gymnasium 0.29 and memory_gym; our envs need gymnasium 1.x), with what it
@@ -54,3 +57,20 @@ def test_nothing_outside_tests_imports_tests() -> None:
         for path in (ROOT / folder).rglob("*.py"):
             bad = {name for name in imported_modules(path) if name.split(".")[0] == "tests"}
             assert not bad, f"{path.relative_to(ROOT)} imports {bad}"
+
+
+def test_info_keys_that_our_core_declares_as_added_are_not_compared(tmp_path: Path, monkeypatch) -> None:
+    env_id = "MortarMayhemB-Grid-v0"
+    trace = load_traces(env_id)
+    dump_json_gz({**trace, "episodes": trace["episodes"][:3]}, tmp_path / f"{env_id}.json.gz")
+    core_class = type(envs.make_core(env_id))
+    step_info = core_class.step_info
+    monkeypatch.setattr(core_class, "step_info", lambda core, k: {**step_info(core, k), "added_by_us": 1})
+    for how in (replay, replay_batched):
+        result = how(env_id, root=tmp_path)
+        assert result.identical < result.steps, how.__name__
+    declared = frozenset(getattr(core_class, "added_info_keys", frozenset()))
+    monkeypatch.setattr(core_class, "added_info_keys", declared | {"added_by_us"}, raising=False)
+    for how in (replay, replay_batched):
+        result = how(env_id, root=tmp_path)
+        assert result.steps > 0 and result.identical == result.steps, (how.__name__, result.mismatches)
