@@ -3,7 +3,7 @@ reference memory-gym==1.0.2, side by side in one run.
 
 (a) single: one env through ``gymnasium.make`` (env checker off, as in the reference run), a constant no-op action,
     ``--episodes`` episodes (episode k reset with seed k), resets included in the timing, construction excluded: the
-    protocol of the paper's Table 2 and of ``scripts/reference_bench.py``. Every id ends its no-op episodes by itself
+    protocol of the paper's Table 2 and of ``scripts.reference.bench``. Every id ends its no-op episodes by itself
     (the Mortar Mayhem family at the first failed check, Mystery Path / Searing Spotlights at their step limits,
     Endless Mystery Path when the stamina runs out, Endless Searing Spotlights after 160 steps without a coin); the
     longest, MysteryPath-v0, runs 512 steps per episode. ``--max-total-steps`` (default 100k, as in the reference
@@ -35,10 +35,10 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 from agents.io import provenance, write_json_atomic  # noqa: E402
-from envs import ENV_IDS, make_core  # noqa: E402
-from scripts.bench_protocol import time_constant_action_episodes  # noqa: E402
+from envs import make_core  # noqa: E402
+from scripts.reference import REFERENCE_IDS  # noqa: E402  (the ids measured: those memory-gym has)
+from scripts.reference.protocol import time_constant_action_episodes  # noqa: E402
 
-BENCH_IDS = [env_id for env_id in ENV_IDS if env_id != "ProofOfMemory-v0"]
 SLOT_COUNTS = (16, 64)
 
 
@@ -84,7 +84,7 @@ def bench_batched(env_id: str, num_envs: int, slot_steps: int) -> dict[str, Any]
 
 def reference_single(env_id: str, episodes: int) -> float | None:
     """(a) of the reference package, run in its isolated venv (None when that venv does not exist)."""
-    from scripts.reference_traces import run_reference_bench
+    from scripts.reference.venv import run_reference_bench
 
     result = run_reference_bench([env_id], episodes=episodes)
     return None if result is None else result.get(env_id)
@@ -92,7 +92,7 @@ def reference_single(env_id: str, episodes: int) -> float | None:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--ids", nargs="+", default=BENCH_IDS, choices=BENCH_IDS, metavar="ID")
+    parser.add_argument("--ids", nargs="+", default=REFERENCE_IDS, choices=REFERENCE_IDS, metavar="ID")
     parser.add_argument("--episodes", type=int, default=100, help="(a): episodes per id")
     parser.add_argument("--max-total-steps", type=int, default=100_000, help="(a): cap on the steps of one run")
     parser.add_argument("--batched-steps", type=int, default=64_000, help="(b): slot-steps per measurement")

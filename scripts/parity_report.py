@@ -1,6 +1,8 @@
 """Replay all reference traces and report the share of identical steps per id.
 
 Usage: python scripts/parity_report.py [--out results/parity.json]
+
+Command line of ``scripts.reference.parity`` (replays through ``gymnasium.make`` and in one batched core).
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from agents.io import write_json_atomic  # noqa: E402
-from envs import ENV_IDS  # noqa: E402
-from tests.parity import REFERENCE_IDS, replay, replay_batched  # noqa: E402
+from scripts.reference import REFERENCE_IDS  # noqa: E402
+from scripts.reference.parity import replay, replay_batched  # noqa: E402
 
 
 def main() -> None:
@@ -23,9 +25,6 @@ def main() -> None:
     args = parser.parse_args()
     report = {}
     for env_id in REFERENCE_IDS:
-        if env_id not in ENV_IDS:
-            print(f"{env_id:32s} not implemented")
-            continue
         report[env_id] = {}
         for face, result in (("single", replay(env_id)), ("batched", replay_batched(env_id))):
             report[env_id][face] = {

@@ -1,12 +1,13 @@
 """Record ground-truth traces from the reference package memory-gym==1.0.2.
 
 Runs INSIDE the isolated reference venv (it imports memory_gym, gymnasium 0.29 and numpy); normally started by
-``scripts/reference_traces.py``. Run it from the repository root:
+``scripts/reference_traces.py``. Run it from the repository root (``--out`` defaults to the committed data in
+``tests/data/``):
 
     export SDL_VIDEODRIVER=dummy
-    .venv-reference/bin/python -m scripts.reference_recorder traces --out tests/data/traces
-    .venv-reference/bin/python -m scripts.reference_recorder verify --out tests/data/traces
-    .venv-reference/bin/python -m scripts.reference_recorder mp-paths --out tests/data/mp_paths.json.gz
+    .venv-reference/bin/python -m scripts.reference.recorder traces [--ids ...] [--out tests/data/traces]
+    .venv-reference/bin/python -m scripts.reference.recorder verify [--ids ...] [--out tests/data/traces]
+    .venv-reference/bin/python -m scripts.reference.recorder mp-paths [--out tests/data/mp_paths.json.gz]
 
 Everything is deterministic (fixed seeds, sorted JSON keys, gzip without timestamp): two runs give identical bytes.
 The scripted policies read private members of the reference envs (target tile, path nodes, coin positions). With
@@ -29,8 +30,8 @@ import gymnasium as gym
 import memory_gym  # noqa: F401  (registers the ids)
 import numpy as np
 
-from scripts.reference_traces import ALL_IDS
-from scripts.trace_format import DIGEST_METHOD, dump_json_gz, load_traces, obs_digest, to_jsonable
+from scripts.reference import MP_PATHS_FILE, REFERENCE_IDS, TRACES_DIR
+from scripts.reference.trace_format import DIGEST_METHOD, dump_json_gz, load_traces, obs_digest, to_jsonable
 
 NUM_RANDOM = 12  # random episodes, reset(seed=1000 + k)
 NUM_SCRIPTED = 12  # scripted episodes, reset(seed=2000 + k)
@@ -414,13 +415,13 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     p_tr = sub.add_parser("traces", help="record <out>/<env_id>.json.gz")
-    p_tr.add_argument("--ids", nargs="+", default=ALL_IDS, choices=ALL_IDS)
-    p_tr.add_argument("--out", type=Path, default=Path("tests/data/traces"))
+    p_tr.add_argument("--ids", nargs="+", default=REFERENCE_IDS, choices=REFERENCE_IDS)
+    p_tr.add_argument("--out", type=Path, default=TRACES_DIR)
     p_ve = sub.add_parser("verify", help="replay <out>/<env_id>.json.gz on the reference")
-    p_ve.add_argument("--ids", nargs="+", default=ALL_IDS, choices=ALL_IDS)
-    p_ve.add_argument("--out", type=Path, default=Path("tests/data/traces"))
+    p_ve.add_argument("--ids", nargs="+", default=REFERENCE_IDS, choices=REFERENCE_IDS)
+    p_ve.add_argument("--out", type=Path, default=TRACES_DIR)
     p_mp = sub.add_parser("mp-paths", help="record the Mystery Path layouts")
-    p_mp.add_argument("--out", type=Path, default=Path("tests/data/mp_paths.json.gz"))
+    p_mp.add_argument("--out", type=Path, default=MP_PATHS_FILE)
     args = parser.parse_args(argv)
 
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")

@@ -2,7 +2,8 @@
 
 One instance, a constant action, ``episodes`` episodes (episode k is reset with seed k), resets included in the
 timing, construction excluded; ``max_total_steps`` is a safeguard that may cut the run mid-episode. Standard library
-and gymnasium only: it also runs inside the isolated reference venv (``scripts/reference_bench.py``).
+only: it runs in the project's venv (``scripts/benchmark_envs.py``) and inside the isolated reference venv
+(``scripts.reference.bench``).
 """
 
 from __future__ import annotations

@@ -7,13 +7,13 @@ import re
 import numpy as np
 import pytest
 
-from scripts.reference_traces import ALL_IDS
-from scripts.trace_format import image_digest, load_mp_paths, load_traces, obs_digest, vector_digest
+from scripts.reference import REFERENCE_IDS
+from scripts.reference.trace_format import image_digest, load_mp_paths, load_traces, obs_digest, vector_digest
 
 PER_STEP = ("actions", "obs", "rewards", "terminated", "truncated", "infos")
 
 
-@pytest.mark.parametrize("env_id", ALL_IDS)
+@pytest.mark.parametrize("env_id", REFERENCE_IDS)
 def test_trace_file_structure(env_id: str) -> None:
     data = load_traces(env_id)
     assert data["env_id"] == env_id

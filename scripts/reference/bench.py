@@ -1,6 +1,6 @@
 """Single-env throughput of the reference package memory-gym==1.0.2 (the paper's Table-2 protocol).
 
-Runs INSIDE the isolated reference venv; normally started by ``scripts.reference_traces.run_reference_bench``.
+Runs INSIDE the isolated reference venv; normally started by ``scripts.reference.venv.run_reference_bench``.
 Protocol per id: one env instance, a constant no-op action (0 or [0, 0]), ``--episodes`` episodes (episode k is
 reset with seed k), resets included in the timing, env construction excluded. Every id terminates on its own under
 the no-op (MP/MP-Grid/SS by their step limits, Endless-MP after 20 steps without stamina, Endless-SS after 160 steps
@@ -8,7 +8,7 @@ without a coin, the MM family at the first failed check); ``--max-total-steps`` 
 cuts the run mid-episode if reached. Prints one JSON line per id: {"id", "steps", "seconds", "steps_per_s",
 "episodes"}.
 
-    SDL_VIDEODRIVER=dummy .venv-reference/bin/python -m scripts.reference_bench --ids MortarMayhem-v0  # repo root
+    SDL_VIDEODRIVER=dummy .venv-reference/bin/python -m scripts.reference.bench --ids MortarMayhem-v0  # repo root
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import os
 import gymnasium as gym
 import memory_gym  # noqa: F401  (registers the ids)
 
-from scripts.bench_protocol import time_constant_action_episodes
-from scripts.reference_traces import ALL_IDS
+from scripts.reference import REFERENCE_IDS
+from scripts.reference.protocol import time_constant_action_episodes
 
 
 def bench(env_id: str, episodes: int = 100, max_total_steps: int = 100_000) -> dict[str, float | int | str]:
@@ -34,7 +34,7 @@ def bench(env_id: str, episodes: int = 100, max_total_steps: int = 100_000) -> d
 def main(argv: list[str] | None = None) -> None:
     """CLI: print one JSON line per benchmarked id."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--ids", nargs="+", default=ALL_IDS, choices=ALL_IDS)
+    parser.add_argument("--ids", nargs="+", default=REFERENCE_IDS, choices=REFERENCE_IDS)
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--max-total-steps", type=int, default=100_000)
     args = parser.parse_args(argv)
