@@ -1,17 +1,20 @@
-"""End-to-end training throughput of GRU-PPO beside the throughput bound of its network on this machine.
+"""Training throughput of every baseline on MMAct Grid, and GRU-PPO beside the bound of its network.
 
     python scripts/benchmark_training.py [--env MortarMayhemB-Grid-v0] [--workers 16] [--worker-steps 128]
-        [--epochs 3] [--minibatches 8] [--updates 4] [--repeats 3] [--precision bf16] [--sb3 auto]
+        [--epochs 3] [--minibatches 8] [--updates 4] [--repeats 3] [--precision bf16]
+        [--methods gru,ppo,stack4,stack16,helm] [--sb3 auto]
 
-* end to end: ``Trainer.train_update()`` (rollout in the batched env, GAE, sequence splitting, PPO epochs with
-  optimizer steps) on the paper's GRU network (configs/mortar_mayhem_b_grid/gru.yaml), env steps per second;
-* bound: the same network, forward + backward only, over the same minibatches of the same batch for the same
+* end to end, per method (configs/mortar_mayhem_b_grid/<method>.yaml at the benchmark's batch): ``train_update()``
+  (rollout in the batched env, GAE, sequence splitting, PPO epochs with optimizer steps), env steps per second, with
+  the share of the rollout, the HELM branch's share (its frozen forward passes during the rollout) and the peak
+  resident memory of a process that trains only that method (each method runs in its own child process);
+* bound: GRU-PPO's network, forward + backward only, over the same minibatches of the same batch for the same
   epochs (inputs gathered beforehand, no rollout, no optimizer): batch size / time. End to end can only approach it;
 * SB3: stable-baselines3-contrib RecurrentPPO at the same workers x steps, epochs and minibatch size, when
   ``sb3_contrib`` is importable (its own default network: CNN features 256, separate actor/critic LSTMs of 256).
 
-The three are measured in turns (``--repeats`` rounds) and reported as medians and as the best round of each
-(the least disturbed one), because the machine may be shared; every round records the load average.
+Methods are measured in turns (``--repeats`` rounds) and reported as medians and as the best round of each (the
+least disturbed one), because the machine may be shared; every round records the load average.
 Prints a table and writes ``results/benchmarks/training.json`` atomically (with versions, git revision, machine).
 """
 
@@ -19,12 +22,14 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import os
+import resource
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
@@ -33,16 +38,18 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 from agents.config import Config, load_config  # noqa: E402
-from agents.io import git_revision, machine_info, versions, write_json_atomic  # noqa: E402
+from agents.io import provenance, write_json_atomic  # noqa: E402
 from agents.models import log_probs_and_entropy  # noqa: E402
 from agents.ppo import filled_index  # noqa: E402
 from agents.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
 from agents.trainer import Trainer  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
+CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"
+METHODS = ("gru", "ppo", "stack4", "stack16", "helm")
 
 
-def benchmark_config(args: argparse.Namespace) -> Config:
+def benchmark_config(args: argparse.Namespace, method: str = "gru") -> Config:
     batch = args.workers * args.worker_steps
     overrides = [
         f"env.id={args.env}",
@@ -56,7 +63,9 @@ def benchmark_config(args: argparse.Namespace) -> Config:
         "run.progress_bar=false",
         "run.checkpoint_interval=0",
     ]
-    return load_config(ROOT / "configs" / "mortar_mayhem_b_grid" / "gru.yaml", overrides)
+    if method == "helm":  # the CPU-sized random transformer: the paper's pretrained one is a download away
+        overrides += [f"model.helm.lm={args.helm_lm}"]
+    return load_config(CONFIG_DIR / f"{method}.yaml", overrides)
 
 
 def end_to_end(trainer: Trainer, updates: int) -> float:
@@ -126,6 +135,53 @@ def sb3_throughput(model: object, args: argparse.Namespace) -> float:
     return batch * args.updates / (time.perf_counter() - started)
 
 
+def measure_method(args: argparse.Namespace, method: str) -> dict[str, float]:
+    """One round of ``method`` in this process: end-to-end steps/s over ``args.updates`` updates after a warm-up, the
+    rollout's and the HELM branch's shares of the time, GRU's network bound, and this process's peak memory."""
+    config = benchmark_config(args, method)
+    with tempfile.TemporaryDirectory() as run_dir:
+        trainer = Trainer(config, run_dir)
+        helm_seconds = [0.0]
+        if trainer.helm is not None:  # time the branch's frozen forward passes (all of them run in the rollout)
+            step = trainer.helm.step
+
+            def timed_step(*a: object, **kw: object) -> object:
+                started = time.perf_counter()
+                out = step(*a, **kw)
+                helm_seconds[0] += time.perf_counter() - started
+                return out
+
+            trainer.helm.step = timed_step  # type: ignore[method-assign]
+        trainer.train_update()  # warm-up: allocations, oneDNN kernel selection
+        helm_seconds[0] = 0.0
+        started = time.perf_counter()
+        rollout_seconds = 0.0
+        for _ in range(args.updates):
+            metrics = trainer.train_update()
+            rollout_seconds += config.batch_size / metrics["charts/rollout_SPS"]
+        seconds = time.perf_counter() - started
+        row = {
+            "end_to_end": args.updates * config.batch_size / seconds,
+            "rollout_share": rollout_seconds / seconds,
+            "helm_share": helm_seconds[0] / seconds,
+            "parameters": float(sum(p.numel() for p in trainer.model.parameters())),
+            "bytes_per_step": float(trainer.buffer.bytes_per_step),
+        }
+        if method == "gru":
+            row["bound"] = network_bound(trainer)
+    row["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux
+    return row
+
+
+def measure_in_child(args: argparse.Namespace, method: str) -> dict[str, float]:
+    """:func:`measure_method` in a fresh process, so that its peak memory is that method's alone."""
+    command = [sys.executable, str(Path(__file__).resolve()), *args.forwarded, "--child", method]
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"measuring {method} failed:\n{done.stderr[-2000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="MortarMayhemB-Grid-v0")
@@ -137,43 +193,67 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="measurement rounds (medians are reported)")
     parser.add_argument("--precision", choices=["fp32", "bf16"], default="bf16")
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0: one per core)")
+    parser.add_argument("--methods", default=",".join(METHODS), help="comma-separated, from " + ", ".join(METHODS))
+    parser.add_argument("--helm-lm", default="random", help="model.helm.lm of the HELM run (default: random)")
     parser.add_argument("--sb3", choices=["auto", "yes", "no"], default="auto", help="include SB3 RecurrentPPO")
+    parser.add_argument("--child", choices=METHODS, help=argparse.SUPPRESS)  # one measurement, printed as JSON
     parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks" / "training.json"))
     args = parser.parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if args.child:
+        print(json.dumps(measure_method(args, args.child)))
+        return 0
+    methods = [m for m in args.methods.split(",") if m]
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown or not methods:
+        parser.error(f"--methods {args.methods!r}: unknown {unknown}; valid methods: {', '.join(METHODS)}")
+    args.forwarded = [  # what a child needs to measure one method (it writes nothing)
+        f"--{name.replace('_', '-')}={getattr(args, name)}"
+        for name in ("env", "workers", "worker_steps", "epochs", "minibatches", "updates", "precision", "threads")
+    ] + [f"--helm-lm={args.helm_lm}"]
     use_sb3 = args.sb3 == "yes" or (args.sb3 == "auto" and sb3_available())
-
-    config = benchmark_config(args)
-    with tempfile.TemporaryDirectory() as run_dir:
-        trainer = Trainer(config, run_dir)
-        trainer.train_update()  # warm-up: allocations, oneDNN kernel selection
-        sb3 = make_sb3(args) if use_sb3 else None
+    sb3 = make_sb3(args) if use_sb3 else None
+    if sb3 is not None:
+        sb3_throughput(sb3, argparse.Namespace(**{**vars(args), "updates": 1}))  # warm-up
+    rounds = []
+    for round_number in range(args.repeats):
+        row: dict[str, object] = {"loadavg_before": os.getloadavg()[0]}
+        for method in methods:
+            row[method] = measure_in_child(args, method)
         if sb3 is not None:
-            sb3_throughput(sb3, argparse.Namespace(**{**vars(args), "updates": 1}))  # warm-up
-        rounds = []
-        for round_number in range(args.repeats):
-            row = {"loadavg_before": os.getloadavg()[0]}
-            row["end_to_end"] = end_to_end(trainer, args.updates)
-            row["bound"] = network_bound(trainer)
-            if sb3 is not None:
-                row["sb3"] = sb3_throughput(sb3, args)
-            row["loadavg_after"] = os.getloadavg()[0]
-            rounds.append(row)
-            print(f"round {round_number + 1}: " + ", ".join(f"{k} {v:.1f}" for k, v in row.items()), flush=True)
+            row["sb3"] = sb3_throughput(sb3, args)
+        row["loadavg_after"] = os.getloadavg()[0]
+        rounds.append(row)
+        speeds = ", ".join(f"{m} {row[m]['end_to_end']:.0f}" for m in methods)  # type: ignore[index]
+        print(f"round {round_number + 1}: steps/s {speeds}" + (f", sb3 {row['sb3']:.0f}" if sb3 else ""), flush=True)
 
-    def aggregate(key: str, how: Callable[[list[float]], float]) -> float | None:
-        values = [r[key] for r in rounds if key in r]
-        return how(values) if values else None
-
-    summary: dict[str, float | None] = {}
+    summary: dict[str, object] = {}
     for how_name, how in (("median", statistics.median), ("best", max)):
-        end, bound, sb3_rate = (aggregate(k, how) for k in ("end_to_end", "bound", "sb3"))
-        summary[f"{how_name}_end_to_end_steps_per_s"] = end
-        summary[f"{how_name}_bound_steps_per_s"] = bound
-        summary[f"{how_name}_end_to_end_over_bound"] = end / bound
-        summary[f"{how_name}_sb3_recurrent_ppo_steps_per_s"] = sb3_rate
-        summary[f"{how_name}_speedup_over_sb3"] = end / sb3_rate if sb3_rate else None
+        per_method = {}
+        for method in methods:
+            values = {key: [r[method][key] for r in rounds] for key in rounds[0][method]}  # type: ignore[index]
+            chosen = {
+                key: how(v) if key in ("end_to_end", "bound") else statistics.median(v) for key, v in values.items()
+            }
+            per_method[method] = chosen
+        for method, row in per_method.items():
+            for reference in ("ppo", "gru"):
+                if reference in per_method and reference != method:
+                    row[f"over_{reference}"] = row["end_to_end"] / per_method[reference]["end_to_end"]
+        if "gru" in per_method:
+            gru = per_method["gru"]
+            gru["end_to_end_over_bound"] = gru["end_to_end"] / gru["bound"]
+        sb3_values = [r["sb3"] for r in rounds if "sb3" in r]
+        sb3_rate = how(sb3_values) if sb3_values else None
+        summary[how_name] = {
+            "methods": per_method,
+            "sb3_recurrent_ppo_steps_per_s": sb3_rate,
+            "gru_speedup_over_sb3": per_method["gru"]["end_to_end"] / sb3_rate
+            if sb3_rate and "gru" in per_method
+            else None,
+        }
     record = {
-        "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
+        "command": " ".join([Path(sys.argv[0]).name, *argv]),
         "setting": {
             "env": args.env,
             "workers": args.workers,
@@ -182,15 +262,13 @@ def main(argv: list[str] | None = None) -> int:
             "epochs": args.epochs,
             "minibatches": args.minibatches,
             "precision": args.precision,
-            "network": "configs/mortar_mayhem_b_grid/gru.yaml (Nature CNN + vector encoder -> GRU 512 -> 512 FCs)",
-            "parameters": sum(p.numel() for p in trainer.model.parameters()),
+            "methods": {m: f"configs/mortar_mayhem_b_grid/{m}.yaml" for m in methods},
+            "helm_lm": args.helm_lm,
             "updates_per_round": args.updates,
         },
         "summary": summary,
         "rounds": rounds,
-        "versions": versions(),
-        "git": git_revision(),
-        "machine": machine_info(),
+        **provenance(),
     }
     if sb3 is not None:
         import sb3_contrib
@@ -200,18 +278,25 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     write_json_atomic(out, record, sort_keys=False)
 
-    rows = [
-        ("end to end (ours), steps/s", "end_to_end_steps_per_s"),
-        ("network bound, steps/s", "bound_steps_per_s"),
-        ("end to end / bound", "end_to_end_over_bound"),
-        ("SB3 RecurrentPPO, steps/s", "sb3_recurrent_ppo_steps_per_s"),
-        ("speedup over SB3", "speedup_over_sb3"),
-    ]
-    print(f"\n{'':30s}{'median':>10s}{'best':>10s}")
-    for label, key in rows:
-        median_value, best_value = summary[f"median_{key}"], summary[f"best_{key}"]
-        if median_value is not None:
-            print(f"{label:30s}{median_value:10.2f}{best_value:10.2f}")
+    print(
+        f"\n{'method':10s}{'steps/s':>10s}{'best':>10s}{'/ PPO':>8s}{'/ GRU':>8s}"
+        f"{'rollout':>9s}{'HELM':>7s}{'peak MiB':>10s}"
+    )
+    median, best = summary["median"]["methods"], summary["best"]["methods"]  # type: ignore[index]
+    for method in methods:
+        m = median[method]
+        ratios = [f"{m[key]:8.2f}" if key in m else f"{'-':>8s}" for key in ("over_ppo", "over_gru")]
+        print(
+            f"{method:10s}{m['end_to_end']:10.0f}{best[method]['end_to_end']:10.0f}{''.join(ratios)}"
+            f"{m['rollout_share']:9.0%}{m['helm_share']:7.0%}{m['peak_rss_mib']:10.0f}"
+        )
+    if "gru" in median:
+        print(
+            f"GRU-PPO network bound {median['gru']['bound']:.0f} steps/s, end to end / bound "
+            f"{median['gru']['end_to_end_over_bound']:.2f}"
+        )
+    if summary["median"]["sb3_recurrent_ppo_steps_per_s"]:  # type: ignore[index]
+        print(f"SB3 RecurrentPPO {summary['median']['sb3_recurrent_ppo_steps_per_s']:.0f} steps/s")  # type: ignore[index]
     print(f"wrote {out}")
     return 0
 
