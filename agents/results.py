@@ -304,6 +304,8 @@ def run_scores(episodes: Records, column: str = "metric") -> Records:
     """
     if column not in episodes:
         raise KeyError(f"no column {column!r} in the episodes; columns: {', '.join(episodes.names)}")
+    if episodes[column].dtype.kind not in "fiu":
+        raise ValueError(f"column {column!r} is not numeric")
     values = np.asarray(episodes[column], dtype=np.float64)
     keys, group = _groups(episodes, ("run", "step"))
     present = np.isfinite(values)

@@ -136,6 +136,10 @@ def test_empty_and_partly_empty_columns(tmp_path: Path) -> None:
     write_csv(tmp_path / "p" / "episodes.csv", rows, EPISODE_COLUMNS)
     with pytest.raises(ValueError, match="'metric' is empty in 1 of the 2 episodes of run"):
         results.run_scores(results.read_episodes(tmp_path / "p"))
+    with pytest.raises(ValueError, match="column 'method' is not numeric"):
+        results.run_scores(episodes, "method")
+    with pytest.raises(KeyError, match="no column 'coins'"):
+        results.run_scores(episodes, "coins")
 
 
 def test_score_matrices_and_curves(results_dir: Path) -> None:
