@@ -9,9 +9,9 @@ What the branch computes, for every environment step of every slot (Paischer et 
    retrieval below only sees the direction of ``q``.
 3. Frozen Hopfield retrieval over the model's token-embedding matrix ``E`` (``V x d``): the cosine similarity of
    ``q`` with every token embedding, a softmax with inverse temperature ``beta``, and the weighted sum of the
-   embeddings, ``E^T softmax(beta * cos(q, E))``. The unit-norm rows of ``E`` are computed once at construction, so a
-   step costs two ``(B, d) x (d, V)`` products. With a large ``beta`` (the paper uses 1000) this is close to
-   picking the nearest token embedding.
+   embeddings, ``E^T softmax(beta * cos(q, E))``. The inverse norms of the rows of ``E`` are computed once at
+   construction (no second copy of ``E``), so a step costs two ``(B, d) x (d, V)`` products. With a large ``beta``
+   (the paper uses 1000) this is close to picking the nearest token embedding.
 4. That pseudo-token embedding goes through the frozen causal transformer as ``inputs_embeds``, one token per
    environment step. The token attends to itself and to the last ``mem_len`` steps of the current episode, whose
    keys and values every layer keeps in a per-slot ring buffer (:class:`HelmMemory`): a step costs one token's
@@ -197,6 +197,14 @@ class HelmMemory:
         """Forget the episode of every slot where ``mask`` (``(batch,)`` bool) is true; O(batch), no copy."""
         self.steps.masked_fill_(mask.to(device=self.steps.device, dtype=torch.bool), 0)
 
+    def load_slot(self, slot: int, source: HelmMemory, source_slot: int = 0) -> None:
+        """Make ``slot`` an exact copy of ``source``'s ``source_slot`` (e.g. an episode replayed alone on resume)."""
+        if source.mem_len != self.mem_len or len(source.keys) != len(self.keys):
+            raise ValueError("the two memories belong to different branches")
+        for mine, theirs in zip((*self.keys, *self.values), (*source.keys, *source.values), strict=True):
+            mine[slot].copy_(theirs[source_slot])
+        self.steps[slot] = source.steps[source_slot]
+
     def nbytes(self) -> int:
         """Bytes held by the key/value buffers."""
         return sum(t.numel() * t.element_size() for t in (*self.keys, *self.values))
@@ -227,7 +235,7 @@ class HelmBranch(nn.Module):
         beta: float = 1000.0,
         mem_len: int = 128,
         seed: int = 0,
-        random_layers: int = 2,
+        random_layers: int = 4,
         random_width: int = 256,
         random_heads: int = 4,
         random_vocab: int = 8192,
@@ -255,7 +263,8 @@ class HelmBranch(nn.Module):
         generator = torch.Generator().manual_seed(projection_seed)
         projection = torch.randn(width, pixels, generator=generator) / width**0.5
         self.register_buffer("projection", projection, persistent=False)
-        self.register_buffer("token_directions", F.normalize(embeddings.detach(), dim=-1), persistent=False)
+        norms = embeddings.detach().norm(dim=-1).clamp_min(1e-12)
+        self.register_buffer("inverse_norms", norms.reciprocal(), persistent=False)
 
         self.requires_grad_(False)
         super().train(False)
@@ -293,7 +302,7 @@ class HelmBranch(nn.Module):
 
     def retrieve(self, queries: Tensor) -> Tensor:
         """Hopfield retrieval ``E^T softmax(beta * cos(q, E))`` of ``(B, d)`` queries -> ``(B, d)`` embeddings."""
-        similarity = F.normalize(queries, dim=-1) @ self.token_directions.T
+        similarity = (F.normalize(queries, dim=-1) @ self.token_embeddings.T) * self.inverse_norms
         weights = torch.softmax(self.beta * similarity, dim=-1)
         return weights @ self.token_embeddings
 
