@@ -43,7 +43,7 @@ Language models. ``lm`` is ``"random"``, a local directory written by ``save_pre
 name; a directory and a name go through the same ``AutoModelForCausalLM.from_pretrained`` call (only the base
 model is kept: the output head is dropped). The model must expose ``get_input_embeddings()`` and accept
 ``inputs_embeds``, ``position_ids``, a 4-d float attention mask and a ``transformers`` ``Cache``. It is loaded in
-float32.
+float32. The attention mask is always the branch's own (causal, windowed, per slot), never the model's.
 
 Recommended model. HELM's ``transfo-xl-wt103`` (18 layers, d = 1024, relative positions, 267 735-token vocabulary,
 about 285M parameters, 1.14 GB in float32) no longer loads in current ``transformers`` (it was removed for its
@@ -59,8 +59,10 @@ the sliding step memory works with no position trick, and its 50 304-token vocab
   is the one to use on a CPU: see the costs below.
 
 GPT-2 (``gpt2``, same shape as pythia-160m) also loads, but its absolute positions saturate after 1024 steps of an
-episode (see above). Larger, better-trained models (Qwen2.5-0.5B, 151k vocabulary) cost more in the retrieval
-than in the transformer on a CPU.
+episode (see above). Larger, better-trained rotary models load too, but a large vocabulary is paid for at every
+step: Qwen2.5-0.5B's 151 936 tokens make the retrieval alone three times as costly as over a 50k vocabulary.
+A hub name needs the network on first use; where there is none, ``save_pretrained`` the model into a directory
+elsewhere and pass that directory.
 
 Random language model (a deviation). ``lm="random"`` builds, with no download, a GPT-NeoX (Pythia-shaped: rotary on
 a quarter of each head, parallel residual, GELU MLP of width 4d) of ``random_layers`` layers, width
@@ -93,7 +95,9 @@ weights (154 MB of ``E``, twice; 340 MB of layers) once per step, so a step grow
 Checkpoints. The branch is rebuilt from its arguments (``lm``, ``seed`` and the sizes), so it adds nothing to a
 ``state_dict`` and :meth:`~torch.nn.Module.load_state_dict` leaves it as built; store :meth:`HelmBranch.fingerprint`
 with a checkpoint to check that a resumed run rebuilt the same weights. The memory is not checkpointed either:
-replaying each slot's current episode through :meth:`HelmBranch.step` rebuilds it exactly.
+replaying each slot's current episode through :meth:`HelmBranch.step` rebuilds it, bit for bit at the same batch
+size (what the other slots hold does not matter), to float rounding otherwise (e.g. one slot replayed alone and
+copied in with :meth:`HelmMemory.load_slot`).
 """
 
 from __future__ import annotations
