@@ -199,20 +199,28 @@ class Actor:
         }
 
     def load_state(self, state: dict[str, Any], seed_source: SeedSource | None = None) -> None:
-        """Rebuild every slot from :meth:`state`: reset with its seed, replay its actions in lockstep."""
+        """Rebuild every slot from :meth:`state`: reset with its seed and replay its actions. The replays end together
+        (a slot with a shorter episode starts later), so every step of the HELM branch sees the whole batch as it did
+        when the steps were first taken; the slots not started yet are cleared when they start."""
         self.seed_source = seed_source
         seeds, actions = state["seeds"], state["actions"]
         self.active[:] = True
-        self._reset(np.arange(self.num_envs), seeds)
-        longest = max((len(a) for a in actions), default=0)
-        for t in range(longest):
-            slots = np.array([k for k, a in enumerate(actions) if len(a) > t], dtype=np.int64)
-            step_actions = np.zeros((self.num_envs, len(self.model.action_dims)), dtype=np.int64)
-            step_actions[slots] = np.stack([actions[k][t] for k in slots])
-            _, terminated, _ = self._env_step(step_actions, slots)
-            if terminated.any():
-                raise RuntimeError("an episode ended during checkpoint replay: the environment is not deterministic")
-            self._observe(slots, starts=np.zeros(0, dtype=np.int64))
+        slots = np.arange(self.num_envs)
+        self.core.reset_slots(slots, [int(s) for s in seeds])
+        self._clear(slots, seeds)
+        lengths = np.array([len(a) for a in actions], dtype=np.int64)
+        begin = lengths.max(initial=0) - lengths  # the replay step at which each slot shows its first observation
+        for j in range(int(lengths.max(initial=0)) + 1):
+            stepping = np.flatnonzero(begin < j)
+            if stepping.size:
+                step_actions = np.zeros((self.num_envs, len(self.model.action_dims)), dtype=np.int64)
+                step_actions[stepping] = np.stack([actions[k][j - begin[k] - 1] for k in stepping])
+                _, terminated, _ = self._env_step(step_actions, stepping)
+                if terminated.any():
+                    raise RuntimeError(
+                        "an episode ended during checkpoint replay: the environment is not deterministic"
+                    )
+            self._observe(np.flatnonzero(begin <= j), starts=np.flatnonzero(begin == j))
         memory = self.memory
         memory.actions = [list(a) for a in actions]
         memory.recurrent = state["recurrent"].to(self.device)
@@ -252,6 +260,12 @@ class Actor:
         """New episodes in ``slots``: the core's reset, fresh slot memory, then the first observation (of the other
         active slots too when ``observe_others``: the step that ended these episodes moved them on as well)."""
         self.core.reset_slots(slots, [int(s) for s in seeds])
+        self._clear(slots, seeds)
+        observed = np.flatnonzero(self.active) if observe_others else slots
+        self._observe(observed, starts=slots)
+
+    def _clear(self, slots: np.ndarray, seeds: Sequence[int]) -> None:
+        """The slot memory of an episode start in ``slots`` (frame stacks and HELM memory start at the observation)."""
         memory = self.memory
         index = torch.from_numpy(slots).to(self.device)
         memory.recurrent[index] = 0.0
@@ -261,17 +275,25 @@ class Actor:
         for k, seed in zip(slots.tolist(), seeds, strict=True):
             memory.seeds[k] = int(seed)
             memory.actions[k] = []
-        observed = np.flatnonzero(self.active) if observe_others else slots
-        self._observe(observed, starts=slots)
 
     def _observe(self, slots: np.ndarray, starts: np.ndarray) -> None:
         """Take the current observation of ``slots`` into their frame stacks (filled with it in ``starts``, the
-        slots that begin an episode) and through the HELM branch."""
+        slots that begin an episode), and the current observation of every slot through the HELM branch (one call is
+        one step of the whole batch: the branch's outputs for a slot do not depend on the others, and a slot that is
+        not playing just fills a memory that is cleared when it starts again)."""
         if slots.size == 0:
             return
-        every = slots.size == self.num_envs
+        every = slots.size == self.num_envs or self.helm is not None
         raw = self.core.observations(None if every else slots)
         arrays = raw if isinstance(raw, dict) else {"visual_observation": raw}
+        if self.helm is not None:
+            image = torch.from_numpy(np.ascontiguousarray(arrays["visual_observation"])).to(self.device)
+            episode_start = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+            episode_start[torch.from_numpy(starts).to(self.device)] = True
+            self.helm_features = self.helm.step(image, self.memory.helm, episode_start)
+            if slots.size != self.num_envs:
+                arrays = {key: array[slots] for key, array in arrays.items()}
+        every = slots.size == self.num_envs
         memory, device = self.memory, self.device
         index = torch.from_numpy(slots).to(device)
         is_start = np.isin(slots, starts)
@@ -290,9 +312,6 @@ class Actor:
             rows[:, -1] = new
             if not every:
                 stack[index] = rows
-        if self.helm is not None:
-            image = torch.from_numpy(np.ascontiguousarray(arrays["visual_observation"])).to(device)
-            self.helm_features[index] = self.helm.step(image, memory.helm, start_rows, slots=index)
 
     def _env_step(self, actions: np.ndarray, slots: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[int, dict]]:
         """Step ``slots`` with their rows of ``actions`` (B, branches), each repeated ``frame_skip`` times (rewards

@@ -53,6 +53,17 @@ def build_agent(
     return model, helm
 
 
+def check_helm(helm: Any, state: dict[str, Any], path: str | Path) -> None:
+    """The HELM branch rebuilt from the config must be the one the checkpoint was trained with (its weights are not
+    stored: a pretrained model's directory or the random seed could have changed)."""
+    found = None if helm is None else helm.fingerprint()
+    if found != state.get("helm"):
+        raise ValueError(
+            f"{path}: the HELM branch built from the config (fingerprint {found}) is not the one this checkpoint was "
+            f"trained with ({state.get('helm')}): has the language model at model.helm.lm changed?"
+        )
+
+
 def checkpoint_path(run_dir: str | Path, update: int) -> Path:
     return Path(run_dir) / "checkpoints" / f"update_{update:07d}.pt"
 
@@ -131,6 +142,7 @@ def load_policy(
 
     spec_core = envs.make_core(config.env.id, 1, config.env.options)
     model, helm = build_agent(config, spec_core.single_observation_space, spec_core.single_action_space, device)
+    check_helm(helm, state, path)
     model.load_state_dict(state["model"])
     model.eval()
     acting = rollout_copy(model, config.run.precision)

@@ -90,10 +90,10 @@ class HelmConfig:
     beta: float = param(1000.0, "inverse temperature of the Hopfield retrieval (the paper's 1000)", low=0.0)
     mem_len: int = param(128, "steps of the current episode the transformer attends to", low=1)
     seed: int = param(0, "seed of the random projection (and of the weights when lm is 'random')", low=0)
-    random_layers: int = param(2, "layers of the 'random' transformer", low=1)
-    random_width: int = param(128, "embedding width of the 'random' transformer", low=8)
+    random_layers: int = param(4, "layers of the 'random' transformer (a Pythia-shaped GPT-NeoX)", low=1)
+    random_width: int = param(256, "embedding width of the 'random' transformer", low=8)
     random_heads: int = param(4, "attention heads of the 'random' transformer", low=1)
-    random_vocab: int = param(4096, "token-embedding rows of the 'random' transformer", low=2)
+    random_vocab: int = param(8192, "token-embedding rows of the 'random' transformer", low=2)
 
     @property
     def enabled(self) -> bool:

@@ -37,6 +37,7 @@ from agents.actor import Actor, refresh_copy, rollout_copy
 from agents.buffer import RolloutBuffer
 from agents.checkpoint import (
     build_agent,
+    check_helm,
     checkpoint_path,
     latest_checkpoint,
     read_checkpoint,
@@ -329,6 +330,7 @@ class Trainer:
                 "episode_seeds": self.episode_seed_rng.bit_generator.state,
             },
             "actor": self.actor.state(),
+            "helm": None if self.helm is None else self.helm.fingerprint(),  # rebuilt from the config, not stored
             "recent_returns": list(self.recent_returns),
         }
         _write_csv(self.run_dir / "training.csv", list(TRAINING_COLUMNS), self.training_rows)
@@ -339,6 +341,7 @@ class Trainer:
         state = read_checkpoint(path)
         if state["config"] != config_to_dict(self.config):
             raise ValueError(f"{path} was written by a different config than {self.run_dir / 'config.yaml'}")
+        check_helm(self.helm, state, path)
         self.update, self.global_step = state["update"], state["global_step"]
         self.model.load_state_dict(state["model"])
         refresh_copy(self.rollout_model, self.model)

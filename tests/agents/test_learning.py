@@ -54,3 +54,14 @@ def test_frame_stacks_bridge_exactly_their_window(tmp_path: Path, config_name: s
         assert _success(history, last=4) >= 0.95
     else:
         assert 0.35 <= _success(history, last=8) <= 0.65
+
+
+@pytest.mark.slow
+def test_helm_with_a_random_transformer_learns_proof_of_memory(tmp_path: Path) -> None:
+    """HELM with lm: random (no pretrained prior) on delay 4: its frozen transformer's memory of the episode carries
+    the cue to the query (measured: success 0.995 over the last updates with the shipped config)."""
+    config = load_config(CONFIGS / "helm.yaml", ["run.progress_bar=false"])
+    assert config.model.memory == "none" and config.model.helm.lm == "random"
+    history = Trainer(config, tmp_path).train()
+    assert _success(history[:2], last=2) < 0.7
+    assert _success(history, last=4) >= 0.9

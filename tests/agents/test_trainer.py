@@ -38,6 +38,15 @@ TINY = {
 }
 
 
+HELM = (  # a tiny random transformer with a memory shorter than the episodes
+    "model.helm.lm=random",
+    "model.helm.mem_len=3",
+    "model.helm.random_layers=2",
+    "model.helm.random_width=32",
+    "model.helm.random_vocab=64",
+)
+
+
 def _config(*overrides: str, raw: dict | None = None):
     return config_from_dict(raw or TINY, list(overrides))
 
@@ -74,7 +83,17 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overri
     """Killed after update 5 with checkpoints every 2: the resumed run ends with the same weights, TensorBoard
     points, training log and evaluation records as an uninterrupted one (nothing of update 5 survives twice)."""
     evaluation = ("eval.interval=3", "eval.seeds=[100000, 100002]", "eval.repetitions=2")
-    config = _config(*overrides, *evaluation, "run.checkpoint_interval=2")
+    _check_resume(tmp_path, _config(*overrides, *evaluation, "run.checkpoint_interval=2"))
+
+
+def test_resume_rebuilds_the_helm_memory_exactly(tmp_path: Path, dict_env: str) -> None:
+    """The HELM branch's memory is rebuilt by replaying the slots' episodes (of different lengths here)."""
+    evaluation = ("eval.interval=3", "eval.seeds=[100000, 100002]", "eval.repetitions=2")
+    env = (f"env.id={dict_env}", "env.options={}")
+    _check_resume(tmp_path, _config("model.memory=none", *HELM, *env, *evaluation, "run.checkpoint_interval=2"))
+
+
+def _check_resume(tmp_path: Path, config) -> None:
     uninterrupted = Trainer(config, tmp_path / "a")
     uninterrupted.train()
 
@@ -327,3 +346,24 @@ def test_freed_tensor_memory_is_reused_without_page_faults() -> None:
     faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
     # glibc's defaults give back the freed 64 MiB each time: ~16k page faults per round (measured 163k for ten)
     assert faults < 16_000, f"{faults} page faults in 10 rounds: freed memory was not reused"
+
+
+def test_helm_outputs_are_cached_once_and_the_branch_never_trains(tmp_path: Path) -> None:
+    """The HELM features stored in the buffer equal a fresh forward of the frozen branch over each episode (from
+    its start: the memory was cleared there), and an update leaves the branch untouched and without gradients."""
+    trainer = Trainer(_config("model.memory=none", *HELM, "env.options.delay=5", "run.worker_steps=24"), tmp_path)
+    before = [p.clone() for p in trainer.helm.parameters()]
+    trainer.train_update()
+    trainer._collect_rollout()
+    buffer = trainer.buffer
+    checked = 0
+    for worker in range(buffer.workers):
+        starts = (buffer.episode_step[worker] == 0).nonzero().flatten().tolist()
+        for first, end in zip(starts, starts[1:], strict=False):  # whole episodes inside the rollout
+            fresh = trainer.helm.recompute_episode(buffer.inputs["image"][worker, first:end])
+            torch.testing.assert_close(buffer.inputs["helm"][worker, first:end], fresh, atol=1e-4, rtol=1e-4)
+            checked += 1
+    assert checked >= 8
+    for param, old in zip(trainer.helm.parameters(), before, strict=True):
+        assert torch.equal(param, old) and param.grad is None and not param.requires_grad
+    assert not any(p is q for p in trainer.helm.parameters() for q in trainer.model.parameters())
