@@ -206,9 +206,9 @@ class SlurmConfig:
     partition: str = param("", "SLURM partition (empty: the cluster's default)")
     time: int | str = param(
         "",
-        "time limit per job: minutes or [D-]HH:MM:SS (empty: 24:00:00); a run that needs longer is requeued and "
-        "resumes from its last checkpoint",
-        expect="minutes (an int) or [D-]HH:MM:SS",
+        "time limit per job, quoted: '[D-]HH:MM:SS' or 'MINUTES' (empty: 24:00:00); a run that needs longer is "
+        "requeued and resumes from its last checkpoint",
+        expect="a quoted time limit, e.g. '24:00:00'",
     )
     gpus_per_job: int = param(0, "GPUs per job", low=0)
     cpus_per_job: int = param(
@@ -475,6 +475,11 @@ def _check_block(block: Any, prefix: str) -> None:
         if isinstance(length, str) and length != "max" or isinstance(length, int) and length < 1:
             raise ConfigError(f"{prefix}.sequence_length={length!r} is invalid: expected an int >= 1 or 'max'")
     elif isinstance(block, SlurmConfig):
+        if isinstance(block.time, int):  # YAML 1.1 reads an unquoted 24:00:00 as the integer 86400
+            raise ConfigError(
+                f"{prefix}.time={block.time!r} is invalid: write the time limit as a quoted string, e.g. '24:00:00' "
+                "or '90' (minutes); unquoted, YAML reads 24:00:00 as the number 86400"
+            )
         if block.time != "":
             slurm_minutes(block.time, f"{prefix}.time")
     elif isinstance(block, RunConfig):
