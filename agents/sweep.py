@@ -720,13 +720,19 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
 
 
 def _plot(results_dir: Path, echo: Echo) -> None:
-    """The panel's curves and final-performance charts, from the plotting module when it is installed."""
+    """The panel's curves and final-performance charts (``agents.plots``) into ``results/plots``. A failure is
+    reported, not raised: the records are written, and ``scripts/plot.py`` can draw them again."""
     try:
-        from agents import plots  # type: ignore[attr-defined]
-    except ImportError:
-        echo("plots: skipped (this checkout has no agents/plots.py)")
+        from agents import plots
+    except ImportError as err:
+        echo(f"plots: skipped ({err}); the records are in {results_dir}")
         return
-    plots.plot_results(results_dir, results_dir / "plots")
+    try:
+        paths = plots.plot_results([results_dir], results_dir / "plots")
+    except Exception as err:  # noqa: BLE001 (whatever goes wrong in a figure must not hide the results)
+        echo(f"plots: failed ({type(err).__name__}: {err}); retry: python scripts/plot.py {results_dir}")
+        return
+    echo("plots: " + ", ".join(str(path) for path in paths))
 
 
 def _read_csv(path: Path) -> list[dict[str, str]]:

@@ -19,7 +19,8 @@ in the background; with ``--evaluate`` this command waits for them.
 
 ``--evaluate`` evaluates every finished run's last checkpoint on the novel seeds and writes the panel's results to
 ``<root>/<panel>/results/`` (episodes.csv with the in-training and final evaluation records, training.csv,
-summary.json, plots).
+summary.json, plots); with ``--no-train`` nothing is launched first (say, while SLURM jobs are queued: the local
+launcher would otherwise train their runs here).
 
 ``--set KEY=VALUE`` applies to every run, after the grid; ``--set grid.AXIS=VALUES`` replaces an axis (e.g.
 ``--set grid.run.seed=[0]``). Exit status: 0 done, 1 some run failed, 2 bad config or arguments.
@@ -68,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", default="runs", help="where the runs and results go (default runs/)")
     parser.add_argument("--dry-run", action="store_true", help="print the runs, steps and disk estimate; train nothing")
     parser.add_argument("--evaluate", action="store_true", help="evaluate the finished runs into <panel>/results")
+    parser.add_argument(
+        "--no-train", action="store_true", help="launch nothing (e.g. --evaluate while SLURM jobs are still queued)"
+    )
     parser.add_argument("--eval-device", default="cpu", help="torch device of the final evaluation (default cpu)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (repeatable)")
     slurm = parser.add_argument_group("SLURM (override the config's grid.slurm block)")
@@ -93,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.dry_run:
             print(describe(panels), end="")
             return 0
-        failed = _train(panels, args)
+        failed = [] if args.no_train else _train(panels, args)
         if args.evaluate:
             for panel in panels:
                 evaluate_panel(panel, device=args.eval_device)
