@@ -51,6 +51,7 @@ import yaml
 
 from agents.checkpoint import checkpoint_update, latest_checkpoint, run_config
 from agents.config import (
+    NAMED_AXES,
     Config,
     ConfigError,
     GridPoint,
@@ -105,12 +106,8 @@ class SweepRun:
     def grid_overrides(self) -> list[tuple[str, Any]]:
         """What the grid sets for this run, in order, without the ``run.method`` / ``run.task`` that the bundles'
         names set (they are in the run's name)."""
-        implicit = {f"run.{axis}" for axis, _ in self.point.choices}
-        return [(key, value) for key, value, source in self.point.overrides if not _is_name_key(key, source, implicit)]
-
-
-def _is_name_key(key: str, source: str, implicit: set[str]) -> bool:
-    return key in implicit and source.startswith(f"grid.{key.split('.')[1]}.")
+        implicit = [(f"run.{axis}", label) for axis, label in self.point.choices if axis in NAMED_AXES]
+        return [(key, value) for key, value, _ in self.point.overrides if (key, value) not in implicit]
 
 
 @dataclass(frozen=True)
