@@ -26,20 +26,10 @@ from agents.config import Config, check_disjoint_seeds
 from agents.io import atomic_write_bytes, atomic_write_text, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.models import ActorCritic
+from agents.results import EPISODE_COLUMNS, read_episodes
+from agents.results import summarize as summarize_episodes
 
-RECORD_COLUMNS = [
-    "run",
-    "method",
-    "task",
-    "env_id",
-    "step",
-    "seed",
-    "repetition",
-    "return",
-    "length",
-    "metric",
-    "metric_reference",
-]
+RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
 FrameHook = Callable[[Actor], None]  # called with the actor once before the first decision and after every decision
 
 
@@ -252,7 +242,8 @@ def evaluate_runs(
             records.extend(found)
             if recorder is not None and video is not None:
                 recorder.write(video, f"{run_dir.name}-step{policy.step}", found)
-    summary = summarize(records)
+    write_records(out / "episodes.csv", records)
+    summary = summarize_episodes(read_episodes(out))
     summary["evaluation"] = {
         "runs": [str(run) for run in run_dirs],
         "seeds": seeds,
@@ -261,7 +252,6 @@ def evaluate_runs(
         "greedy": greedy,
         **provenance(),
     }
-    write_records(out / "episodes.csv", records)
     write_json_atomic(out / "summary.json", summary, sort_keys=False)
     return summary
 
@@ -301,24 +291,3 @@ class EpisodeVideo:
             atomic_write_bytes(path, data.getvalue())
             paths.append(path)
         return paths
-
-
-def summarize(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Per run and checkpoint: episodes, mean return and length, mean metric (the paper's) and its reference figure."""
-    groups: dict[tuple, list[dict[str, Any]]] = {}
-    for record in records:
-        groups.setdefault((record["run"], record["method"], record["task"], record["step"]), []).append(record)
-    runs = []
-    for (run, method, task, step), group in groups.items():
-        runs.append(
-            {
-                "run": run,
-                "method": method,
-                "task": task,
-                "step": step,
-                "episodes": len(group),
-                **{key: float(np.mean([r[key] for r in group])) for key in ("return", "length", "metric")},
-                "metric_reference": float(np.mean([r["metric_reference"] for r in group])),
-            }
-        )
-    return {"runs": runs}

@@ -662,13 +662,14 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
       then the final evaluation of its last checkpoint, which takes the place of the in-training records of that
       step (same seeds, repetitions and sampling seed); the ``run`` column holds the run's name;
     * ``training.csv``: the runs' ``training.csv`` one after the other, ``run`` as above;
-    * ``summary.json``: per run the final evaluation's means (:func:`agents.evaluation.summarize`), the runs not
-      finished yet, the protocol and provenance;
-    * the plots of the plotting module, when it is installed.
+    * ``summary.json``: :func:`agents.results.summarize` of those records (per run and step the means; per method
+      and task, at every step the runs share, the IQM across runs with its 95% stratified-bootstrap interval), the
+      runs not finished yet, the protocol and provenance;
+    * ``plots/``: the curves and final-performance figures of :func:`agents.plots.plot_results`.
 
     Runs not finished are left out (and listed). Returns the results directory."""
-    from agents.evaluation import read_records, summarize, write_records
-    from agents.trainer import TRAINING_COLUMNS
+    from agents.evaluation import read_records, write_records
+    from agents.results import TRAINING_COLUMNS, read_episodes, summarize
 
     found = statuses(panel.runs)
     finished = [s.run for s in found if s.state == FINISHED]
@@ -676,7 +677,6 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
     if not finished:
         raise SweepError(f"{panel.name}: no finished run to evaluate ({len(unfinished)} not finished)")
     records: list[dict[str, Any]] = []
-    finals: list[dict[str, Any]] = []
     rows: list[dict[str, Any]] = []
     for index, run in enumerate(finished, 1):
         echo(f"[{index}/{len(finished)}] final evaluation: {run.name}")
@@ -686,7 +686,6 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
         if in_training.is_file():
             records += [{**r, "run": run.name} for r in read_records(in_training) if r["step"] < last]
         records += final
-        finals += final
         rows += [{**row, "run": run.name} for row in _read_csv(run.run_dir / "training.csv")]
     out = panel.results_dir
     write_records(out / "episodes.csv", records)
@@ -696,8 +695,8 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
         "panel": panel.name,
         "config": str(panel.source) if panel.source else None,
         "overrides": list(panel.overrides),
-        "runs": summarize(finals)["runs"],
         "unfinished": unfinished,
+        **summarize(read_episodes(out)),
         "evaluation": {
             "seeds": first.eval_seeds,
             "repetitions": first.eval.repetitions,

@@ -48,10 +48,10 @@ from agents.evaluation import evaluate, read_records, record_means, seed_list, w
 from agents.io import atomic_write_text, now, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.ppo import explained_variance, gae_advantages, ppo_update
+from agents.results import TRAINING_COLUMNS
 from agents.sequences import split_sequences
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
-TRAINING_COLUMNS = ["run", "method", "task", "env_id", "step", "return", "length", "metric"]
 
 
 class TrainingDiverged(RuntimeError):
@@ -331,7 +331,7 @@ class Trainer:
             "actor": self.actor.state(),
             "recent_returns": list(self.recent_returns),
         }
-        _write_csv(self.run_dir / "training.csv", TRAINING_COLUMNS, self.training_rows)
+        _write_csv(self.run_dir / "training.csv", list(TRAINING_COLUMNS), self.training_rows)
         keep = self.config.run.keep_checkpoints
         return write_checkpoint(checkpoint_path(self.run_dir, self.update), state, keep)
 

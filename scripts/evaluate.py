@@ -6,10 +6,10 @@
 Every run is rebuilt from its own saved config and checkpoint(s) (memory module, frame stack, HELM branch), and
 all seed x repetition episodes of a checkpoint play at once in one batched environment. Writes
 ``OUT/episodes.csv`` (one record per episode) and ``OUT/summary.json`` (per run and checkpoint: mean, IQM and the
-paper's metric; IQM with 95% bootstrap intervals across runs per method and task), both atomically. The default
-seeds are the run's ``eval`` seeds (30 right after ``env.train_seeds`` unless the config names others); seeds that
-overlap the training range are refused. ``--video DIR`` writes GIFs of the first episodes: the agent's view beside
-the ground truth.
+paper's metric; IQM with 95% stratified-bootstrap intervals across runs per method and task), both atomically.
+The default seeds are the run's ``eval`` seeds (30 right after ``env.train_seeds`` unless the config names others);
+seeds that overlap the training range are refused. ``--video DIR`` writes GIFs of the first episodes: the agent's
+view beside the ground truth.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 
 from agents.config import ConfigError  # noqa: E402
 from agents.evaluation import evaluate_runs  # noqa: E402
+from agents.results import format_table  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -62,11 +63,8 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    for row in summary["runs"]:
-        print(
-            f"{row['run']:>24s}  {row['method']:>10s}  {row['task']:>24s}  step {row['step']:>10d}  "
-            f"episodes {row['episodes']:>4d}  return {row['return']:.3f}  metric {row['metric']:.3f}"
-        )
+    print(format_table(summary["runs"], ["run", "method", "task", "step", "episodes", "mean", "iqm", "metric"]))
+    print(format_table(summary["aggregate"]))
     print(f"wrote {out / 'episodes.csv'} and {out / 'summary.json'}")
     return 0
 

@@ -70,8 +70,15 @@ def test_local_sweep_end_to_end_with_evaluate(tmp_path: Path, capsys: pytest.Cap
     results = root / "two" / "results"
     names = ["two/ppo/pom/seed7", "two/gru/pom/seed7"]
     summary = json.loads((results / "summary.json").read_text())
-    assert [run["run"] for run in summary["runs"]] == names and summary["unfinished"] == ["two/broken/pom/seed7"]
-    assert all(run["step"] == 192 and run["episodes"] == 6 for run in summary["runs"])
+    assert summary["panel"] == "two" and summary["unfinished"] == ["two/broken/pom/seed7"]
+    assert sorted((run["run"], run["step"], run["episodes"]) for run in summary["runs"]) == sorted(
+        (name, step, 6) for name in names for step in (128, 192)
+    )
+    assert {(row["method"], row["task"], row["runs"]) for row in summary["aggregate"] if row["step"] == 192} == {
+        ("ppo", "pom", 1),
+        ("gru", "pom", 1),
+    }
+    assert {path.name for path in (results / "plots").iterdir()} >= {"curves.png", "final.png"}
     records = read_records(results / "episodes.csv")
     assert sorted({(r["run"], r["step"]) for r in records}) == sorted((n, s) for n in names for s in (128, 192))
     assert {r["method"] for r in records} == {"ppo", "gru"} and {r["task"] for r in records} == {"pom"}
@@ -88,7 +95,7 @@ def test_local_sweep_end_to_end_with_evaluate(tmp_path: Path, capsys: pytest.Cap
         in_training = [r for r in read_records(run_dir / "eval" / "episodes.csv") if r["step"] == 192]
         assert final == in_training
     assert (root / "two" / "broken" / "pom" / "seed7" / "stdout.log").is_file()
-    assert "plots" in out
+    assert "plots: " in out and "failed" not in out.split("plots: ")[1].splitlines()[0]
 
     before = {name: _snapshot(root.joinpath(*name.split("/"))) for name in names}
     assert sweep_script.main([str(config), "--root", str(root), "--no-train", "--evaluate"]) == 0  # nothing launched

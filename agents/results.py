@@ -1,0 +1,654 @@
+"""Reading evaluation records and aggregating them across runs: run-level scores, score matrices, curves, summaries.
+
+A results directory holds ``episodes.csv`` (one row per evaluated episode, written by the evaluation) and, optionally,
+``training.csv`` (one row per PPO update of every run). Their first columns are fixed (:data:`EPISODE_COLUMNS`,
+:data:`TRAINING_COLUMNS`); any further numeric column (``success``, ``commands_completed``, ...) is kept and may be
+empty in some rows.
+
+The paper's protocol: a run's score at a checkpoint is the mean of its episodes (30 novel seeds x 5 repetitions);
+runs are aggregated with the interquartile mean and a 95% stratified-bootstrap interval (:mod:`agents.stats`).
+Runs of one method that were evaluated at different checkpoints are compared only at the steps they share, with a
+:class:`ResultsWarning` saying what was left out. numpy and the standard library only.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from agents import stats
+
+__all__ = [
+    "EPISODE_COLUMNS",
+    "TRAINING_COLUMNS",
+    "MethodScores",
+    "Records",
+    "Results",
+    "ResultsWarning",
+    "aggregate",
+    "estimate",
+    "format_table",
+    "read_episodes",
+    "read_results",
+    "read_training",
+    "run_scores",
+    "run_summary",
+    "score_curves",
+    "score_matrices",
+    "summarize",
+    "training_curves",
+]
+
+EPISODE_COLUMNS = (
+    "run",
+    "method",
+    "task",
+    "env_id",
+    "step",
+    "seed",
+    "repetition",
+    "return",
+    "length",
+    "metric",
+    "metric_reference",
+)
+TRAINING_COLUMNS = ("run", "method", "task", "env_id", "step", "return", "length", "metric")
+TEXT_COLUMNS = ("run", "method", "task", "env_id")
+_INTEGER_COLUMNS = ("step", "seed", "repetition")
+_REQUIRED_VALUES = {  # numeric columns that may not be empty
+    "episodes.csv": ("step", "seed", "repetition", "return", "length"),
+    "training.csv": ("step",),
+}
+
+Steps = Literal["all", "last"] | int | Sequence[int]
+
+
+class ResultsWarning(UserWarning):
+    """Something was left out of an aggregate (checkpoints not shared by all runs, empty columns, missing files)."""
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, ResultsWarning, stacklevel=3)
+
+
+class Records:
+    """A column-oriented table: name -> 1-D numpy array (text as ``str`` arrays, numbers as int64/float64)."""
+
+    def __init__(self, columns: Mapping[str, np.ndarray]) -> None:
+        self.columns = {name: np.asarray(values) for name, values in columns.items()}
+        lengths = {len(values) for values in self.columns.values()}
+        if len(lengths) > 1:
+            raise ValueError(f"columns of different lengths: {sorted(lengths)}")
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.columns)
+
+    def __len__(self) -> int:
+        return len(next(iter(self.columns.values()))) if self.columns else 0
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.columns
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """A column by name."""
+        if name not in self.columns:
+            raise KeyError(f"no column {name!r}; columns: {', '.join(self.columns)}")
+        return self.columns[name]
+
+    def take(self, names: Sequence[str]) -> Records:
+        """A table of the given columns."""
+        return Records({name: self[name] for name in names})
+
+    def select(self, mask: np.ndarray) -> Records:
+        """The rows where ``mask`` is true (or the rows at the given indices)."""
+        return Records({name: values[mask] for name, values in self.columns.items()})
+
+    def where(self, **equal: Any) -> Records:
+        """The rows whose columns equal the given values, e.g. ``records.where(method="gru", task="MysteryPath")``."""
+        mask = np.ones(len(self), dtype=bool)
+        for name, value in equal.items():
+            mask &= self[name] == value
+        return self.select(mask)
+
+    def unique(self, name: str) -> list:
+        """The distinct values of a column, sorted, as Python objects."""
+        return np.unique(self[name]).tolist()
+
+    @staticmethod
+    def concat(tables: Sequence[Records]) -> Records:
+        """Rows of all tables; a column missing from some table is empty (NaN) there."""
+        names: list[str] = []
+        for table in tables:
+            names += [name for name in table.names if name not in names]
+        columns = {}
+        for name in names:
+            parts = [table[name] if name in table else np.full(len(table), np.nan) for table in tables]
+            columns[name] = np.concatenate(parts) if parts else np.array([])
+        return Records(columns)
+
+
+@dataclass(frozen=True)
+class Results:
+    """The records of one or several results directories."""
+
+    episodes: Records
+    training: Records | None
+    directories: tuple[Path, ...]
+
+
+def _parse_csv(path: Path, required: Sequence[str]) -> Records:
+    with path.open(newline="") as handle:
+        rows = list(csv.reader(handle))
+    if not rows:
+        raise ValueError(f"{path} is empty: expected a header starting with {', '.join(required)}")
+    header, body = rows[0], rows[1:]
+    missing = [name for name in required if name not in header]
+    if missing:
+        raise ValueError(f"{path} lacks the column(s) {', '.join(missing)}; its header is: {', '.join(header)}")
+    if tuple(header[: len(required)]) != tuple(required):
+        raise ValueError(
+            f"{path}: the first columns must be, in this order, {', '.join(required)}; found {', '.join(header)}"
+        )
+    if len(set(header)) != len(header):
+        raise ValueError(f"{path}: repeated column names in the header {', '.join(header)}")
+    for line, row in enumerate(body, start=2):
+        if len(row) != len(header):
+            raise ValueError(f"{path}, line {line}: {len(row)} fields where the header has {len(header)}")
+    cells = list(zip(*body, strict=True)) if body else [() for _ in header]
+    must_have = _REQUIRED_VALUES.get(path.name, ())
+    columns: dict[str, np.ndarray] = {}
+    for index, name in enumerate(header):
+        values = cells[index]
+        if name in TEXT_COLUMNS:
+            columns[name] = np.array(values, dtype=str)
+            continue
+        numbers = _numbers(values)
+        if numbers is None:
+            if name in required:
+                line, value = next((i, v) for i, v in enumerate(values, start=2) if _numbers([v]) is None)
+                raise ValueError(f"{path}, line {line}: column {name!r} holds {value!r}, not a number") from None
+            columns[name] = np.array(values, dtype=str)  # an extra column of text: kept as it is
+            continue
+        if name in must_have and not np.all(np.isfinite(numbers)):
+            line = 2 + int(np.flatnonzero(~np.isfinite(numbers))[0])
+            raise ValueError(f"{path}, line {line}: column {name!r} is empty or not finite")
+        if name in _INTEGER_COLUMNS and name in must_have:
+            if not np.all(numbers == np.round(numbers)):
+                raise ValueError(f"{path}: column {name!r} holds values that are not whole numbers")
+            numbers = numbers.astype(np.int64)
+        columns[name] = numbers
+    for name in ("run", "method", "env_id"):
+        empty = np.flatnonzero(columns[name] == "")
+        if len(empty):
+            raise ValueError(f"{path}, line {2 + int(empty[0])}: column {name!r} is empty")
+    columns["task"] = np.where(columns["task"] == "", columns["env_id"], columns["task"])  # the task defaults to the id
+    return Records(columns)
+
+
+def _numbers(values: Sequence[str]) -> np.ndarray | None:
+    """Cells as float64, an empty cell as NaN; None if a cell is not a number."""
+    try:
+        return np.array([float(value) if value.strip() else math.nan for value in values], dtype=np.float64)
+    except ValueError:
+        return None
+
+
+def _directory(path: str | Path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"results directory {path} does not exist")
+    if not path.is_dir():
+        raise NotADirectoryError(f"{path} is not a directory (expected a results directory holding episodes.csv)")
+    return path
+
+
+RUN_KEYS = ("method", "task", "run")  # a run is named within its method and task (sweeps: .../<method>/<task>/seed<k>)
+
+
+def _run_ids(records: Records) -> np.ndarray:
+    """One identifier per row for the run it belongs to: ``method/task/run``."""
+    return np.char.add(
+        np.char.add(np.char.add(records["method"].astype(str), "/"), records["task"].astype(str) + "/"),
+        records["run"].astype(str),
+    )
+
+
+def _check_runs(records: Records, what: str) -> None:
+    """Every run (method/task/run) belongs to one environment; every task to one environment id."""
+    identified = Records({**records.columns, "run": _run_ids(records)})
+    for key, others in (("run", ("env_id",)), ("task", ("env_id",))):
+        for other in others:
+            table = identified
+            pairs = np.unique(np.stack([table[key], table[other]]), axis=1) if len(table) else np.empty((2, 0))
+            names, counts = np.unique(pairs[0], return_counts=True)
+            if np.any(counts > 1):
+                name = str(names[counts > 1][0])
+                values = sorted(pairs[1][pairs[0] == name].tolist())
+                raise ValueError(f"{what}: {key} {name!r} appears with several {other} values: {', '.join(values)}")
+
+
+def _check_unique(records: Records, keys: Sequence[str], what: str) -> None:
+    if not len(records):
+        return
+    table = np.stack([records[key].astype(str) for key in keys])
+    _, first, counts = np.unique(table, axis=1, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        row = int(first[counts > 1][0])
+        described = ", ".join(f"{key}={records[key][row]}" for key in keys)
+        raise ValueError(f"{what}: {int(counts.max())} rows for the same {described} (the same run read twice?)")
+
+
+def read_episodes(*directories: str | Path) -> Records:
+    """The ``episodes.csv`` of every directory, concatenated and checked (columns, one method/task per run)."""
+    if not directories:
+        raise ValueError("no results directory given")
+    tables = []
+    for directory in map(_directory, directories):
+        path = directory / "episodes.csv"
+        if not path.is_file():
+            raise FileNotFoundError(f"{directory} has no episodes.csv (the evaluation's per-episode records)")
+        tables.append(_parse_csv(path, EPISODE_COLUMNS))
+        if not len(tables[-1]):
+            raise ValueError(f"{path} holds no episode records (only a header)")
+    records = Records.concat(tables)
+    what = "episodes.csv of " + ", ".join(map(str, directories))
+    _check_runs(records, what)
+    _check_unique(records, (*RUN_KEYS, "step", "seed", "repetition"), what)
+    return records
+
+
+def read_training(*directories: str | Path) -> Records | None:
+    """The ``training.csv`` of every directory that has one, concatenated; None if none has one (with a warning)."""
+    tables, missing = [], []
+    for directory in map(_directory, directories):
+        path = directory / "training.csv"
+        if path.is_file():
+            tables.append(_parse_csv(path, TRAINING_COLUMNS))
+        else:
+            missing.append(str(directory))
+    if missing:
+        _warn(f"no training.csv in {', '.join(missing)}: no training curves for the runs there")
+    if not tables:
+        return None
+    records = Records.concat(tables)
+    what = "training.csv of " + ", ".join(map(str, directories))
+    _check_runs(records, what)
+    _check_unique(records, (*RUN_KEYS, "step"), what)
+    return records
+
+
+def read_results(*directories: str | Path) -> Results:
+    """Episodes and training logs of one or several results directories; a run must agree between the two."""
+    episodes = read_episodes(*directories)
+    training = read_training(*directories)
+    if training is not None:
+        both = Records.concat([episodes.take(TEXT_COLUMNS), training.take(TEXT_COLUMNS)])
+        _check_runs(both, "episodes.csv and training.csv")
+    return Results(episodes, training, tuple(Path(directory) for directory in directories))
+
+
+def _groups(records: Records, keys: Sequence[str]) -> tuple[Records, np.ndarray]:
+    """The distinct key combinations (sorted) and, for every row, the index of its combination."""
+    codes, firsts = [], []
+    for key in keys:
+        uniques, inverse = np.unique(records[key], return_inverse=True)
+        codes.append(inverse.reshape(-1))
+        firsts.append(len(uniques))
+    combined = np.zeros(len(records), dtype=np.int64)
+    for code, size in zip(codes, firsts, strict=True):
+        combined = combined * size + code
+    _, first, inverse = np.unique(combined, return_index=True, return_inverse=True)
+    return records.take(keys).select(first), inverse.reshape(-1)
+
+
+def run_scores(episodes: Records, column: str = "metric") -> Records:
+    """One score per run and checkpoint: the mean of ``column`` over the run's episodes at that step.
+
+    Columns: run, method, task, env_id, step, score, episodes. A run/step whose episodes all leave ``column`` empty
+    is left out (with a warning: ``success`` is empty for the endless tasks); a partly empty one is an error.
+    """
+    if column not in episodes:
+        raise KeyError(f"no column {column!r} in the episodes; columns: {', '.join(episodes.names)}")
+    if episodes[column].dtype.kind not in "fiu":
+        raise ValueError(f"column {column!r} is not numeric")
+    values = np.asarray(episodes[column], dtype=np.float64)
+    keys, group = _groups(episodes, (*RUN_KEYS, "step"))
+    present = np.isfinite(values)
+    count = np.bincount(group, minlength=len(keys))
+    filled = np.bincount(group, weights=present, minlength=len(keys)).astype(np.int64)
+    total = np.bincount(group, weights=np.where(present, values, 0.0), minlength=len(keys))
+    partial = np.flatnonzero((filled > 0) & (filled < count))
+    if len(partial):
+        at = int(partial[0])
+        raise ValueError(
+            f"column {column!r} is empty in {count[at] - filled[at]} of the {count[at]} episodes of run "
+            f"{keys['run'][at]!r} at step {keys['step'][at]}"
+        )
+    empty = filled == 0
+    if np.any(empty):
+        runs = sorted(set(keys["run"][empty].tolist()))
+        _warn(f"column {column!r} is empty for {int(empty.sum())} run/step pair(s) (runs {', '.join(runs)}): left out")
+    first = np.unique(group, return_index=True)[1]  # a row of every (run, step), in the order of ``keys``
+    described = episodes.take(("run", "method", "task", "env_id", "step")).select(first)
+    scores = Records({**described.columns, "score": total / np.maximum(count, 1), "episodes": count})
+    return scores.select(~empty)
+
+
+@dataclass(frozen=True)
+class MethodScores:
+    """Run-level scores of one method, one column per task (tasks may have different numbers of runs).
+
+    ``columns[j]`` has shape (runs of ``tasks[j]``, checkpoints); ``steps[j]`` the same shape: the step each score was
+    taken at (one row of ``checkpoints`` for curves; each run's own last step for final scores). ``runs[j]`` names the
+    rows; ``episodes[j]`` counts the episodes behind each score (None for training curves).
+    """
+
+    method: str
+    tasks: tuple[str, ...]
+    runs: tuple[tuple[str, ...], ...]
+    steps: tuple[np.ndarray, ...]
+    columns: tuple[np.ndarray, ...]
+    episodes: tuple[np.ndarray, ...] | None
+
+    @property
+    def checkpoints(self) -> np.ndarray:
+        """The step of every checkpoint (the largest where runs end at different steps)."""
+        return np.max(np.concatenate(self.steps, axis=0), axis=0)
+
+    def array(self) -> np.ndarray:
+        """Scores as one (runs, tasks, checkpoints) array; every task must have the same number of runs."""
+        counts = {len(column) for column in self.columns}
+        if len(counts) != 1:
+            described = ", ".join(f"{task}: {len(runs)}" for task, runs in zip(self.tasks, self.runs, strict=True))
+            raise ValueError(f"method {self.method!r} has different numbers of runs per task ({described})")
+        return np.stack(self.columns, axis=1)
+
+    def matrix(self) -> np.ndarray:
+        """Scores as a (runs, tasks) matrix; only for one checkpoint (:func:`score_matrices`)."""
+        array = self.array()
+        if array.shape[2] != 1:
+            raise ValueError(f"{array.shape[2]} checkpoints: take array() or one step with score_matrices()")
+        return array[:, :, 0]
+
+
+def _select_steps(scores: Records, steps: Steps) -> Records:
+    if isinstance(steps, str):
+        return scores
+    wanted = np.atleast_1d(np.asarray(steps, dtype=np.int64))
+    found = np.isin(wanted, scores["step"])
+    if not np.all(found):
+        raise ValueError(f"no episodes at step(s) {', '.join(map(str, wanted[~found]))}")
+    ids = _run_ids(scores)
+    lacking = [run for run in np.unique(ids) if not np.all(np.isin(wanted, scores["step"][ids == run]))]
+    if lacking:
+        _warn(f"run(s) {', '.join(lacking)} have no episodes at some of the step(s) {wanted.tolist()}: left out there")
+    return scores.select(np.isin(scores["step"], wanted))
+
+
+def _shared_steps(scores: Records, label: str) -> np.ndarray:
+    """The steps at which every run of ``scores`` has a score; warns about the others."""
+    ids = _run_ids(scores)
+    runs = np.unique(ids)
+    per_run = {run: np.unique(scores["step"][ids == run]) for run in runs}
+    shared = per_run[runs[0]]
+    for run_steps in per_run.values():
+        shared = np.intersect1d(shared, run_steps)
+    every = np.unique(scores["step"])
+    if len(shared) < len(every):
+        dropped = np.setdiff1d(every, shared)
+        counts = ", ".join(f"{run}: {len(per_run[run])}" for run in runs)
+        _warn(
+            f"{label}: runs were evaluated at different steps (checkpoints per run: {counts}); using the "
+            f"{len(shared)} step(s) all runs share and leaving out {len(dropped)} (first: {dropped[:5].tolist()})"
+        )
+    return shared
+
+
+def _method_scores(scores: Records, method: str, steps: Steps, label: str) -> MethodScores | None:
+    tasks = tuple(np.unique(scores["task"]).tolist())
+    if steps == "last":
+        runs, columns, at, counts = [], [], [], []
+        for task in tasks:
+            rows = scores.where(task=task)
+            names = np.unique(rows["run"])
+            last = [int(rows["step"][rows["run"] == run].max()) for run in names]
+            picked = [
+                int(np.flatnonzero((rows["run"] == run) & (rows["step"] == s))[0])
+                for run, s in zip(names, last, strict=True)
+            ]
+            runs.append(tuple(names.tolist()))
+            columns.append(rows["score"][picked][:, None])
+            at.append(np.asarray(last, dtype=np.int64)[:, None])
+            counts.append(rows["episodes"][picked][:, None])
+        ends = np.unique(np.concatenate(at))
+        if len(ends) > 1:
+            _warn(f"{label}: runs end at different steps ({', '.join(map(str, ends))}); each run's last is taken")
+        return MethodScores(method, tasks, tuple(runs), tuple(at), tuple(columns), tuple(counts))
+    shared = _shared_steps(scores, label)
+    if len(shared) == 0:
+        _warn(f"{label}: the runs share no checkpoint step; left out")
+        return None
+    runs, columns, at, counts = [], [], [], []
+    for task in tasks:
+        rows = scores.where(task=task)
+        rows = rows.select(np.isin(rows["step"], shared))
+        names = np.unique(rows["run"])
+        order = np.lexsort((rows["step"], np.searchsorted(names, rows["run"])))  # by run, then step
+        shape = (len(names), len(shared))
+        runs.append(tuple(names.tolist()))
+        columns.append(rows["score"][order].reshape(shape))
+        at.append(np.broadcast_to(shared, shape).copy())
+        counts.append(rows["episodes"][order].reshape(shape))
+    return MethodScores(method, tasks, tuple(runs), tuple(at), tuple(columns), tuple(counts))
+
+
+def score_curves(episodes: Records, column: str = "metric", steps: Steps = "all") -> dict[str, MethodScores]:
+    """Per method, its run-level scores at the checkpoint steps all its runs share: ``.array()`` is (runs, tasks,
+    checkpoints). ``steps`` limits the checkpoints (a step or a list of steps)."""
+    scores = _select_steps(run_scores(episodes, column), steps)
+    found = {}
+    for method in np.unique(scores["method"]).tolist():
+        method_scores = _method_scores(scores.where(method=method), method, "all", f"method {method!r}")
+        if method_scores is not None:
+            found[method] = method_scores
+    return found
+
+
+def score_matrices(
+    episodes: Records, step: int | Literal["last"] = "last", column: str = "metric"
+) -> dict[str, MethodScores]:
+    """Per method, its run-level scores at one step (or at each run's last checkpoint): ``.matrix()`` is (runs,
+    tasks)."""
+    scores = run_scores(episodes, column)
+    if step != "last":
+        scores = _select_steps(scores, int(step))
+    found = {}
+    for method in np.unique(scores["method"]).tolist():
+        rows = scores.where(method=method)
+        method_scores = _method_scores(rows, method, "last", f"method {method!r}")
+        if method_scores is not None:
+            found[method] = method_scores
+    return found
+
+
+def estimate(
+    scores: MethodScores, task: str, reps: int = 2000, confidence: float = 0.95, seed: int = 0
+) -> list[dict[str, Any]]:
+    """IQM and stratified-bootstrap interval across the runs of ``scores`` at every checkpoint, as rows:
+    method, task (the given label), step, iqm, low, high, runs, episodes."""
+    point, low, high = stats.stratified_estimates(scores.columns, reps=reps, confidence=confidence, seed=seed)
+    runs = sum(len(column) for column in scores.columns)
+    episodes = None if scores.episodes is None else np.sum(np.concatenate(scores.episodes, axis=0), axis=0)
+    return [
+        {
+            "method": scores.method,
+            "task": task,
+            "step": int(step),
+            "iqm": float(point[k]),
+            "low": float(low[k]),
+            "high": float(high[k]),
+            "runs": runs,
+            "episodes": None if episodes is None else int(episodes[k]),
+        }
+        for k, step in enumerate(scores.checkpoints)
+    ]
+
+
+def aggregate(
+    episodes: Records,
+    column: str = "metric",
+    steps: Steps = "all",
+    reps: int = 2000,
+    confidence: float = 0.95,
+    seed: int = 0,
+    overall: bool = True,
+) -> list[dict[str, Any]]:
+    """IQM and 95% stratified-bootstrap interval across runs, per method and task and, with ``overall``, per method
+    over all its tasks (task ``"all"``, only for methods with several tasks).
+
+    Rows: method, task, step, iqm, low, high, runs, episodes; sorted by method, task, step. ``steps``: ``"all"``
+    (every checkpoint the runs share), ``"last"`` (each run's last checkpoint; the row's step is the largest of
+    them, with a warning where runs differ), a step or a list of steps.
+    """
+    scores = _select_steps(run_scores(episodes, column), steps)
+    rows: list[dict[str, Any]] = []
+    for method in np.unique(scores["method"]).tolist():
+        of_method = scores.where(method=method)
+        tasks = np.unique(of_method["task"]).tolist()
+        groups = [(task, of_method.where(task=task), f"method {method!r}, task {task!r}") for task in tasks]
+        if overall and len(tasks) > 1:
+            groups.append(("all", of_method, f"method {method!r}, all tasks"))
+        for task, rows_of_group, label in groups:
+            method_scores = _method_scores(rows_of_group, method, "last" if steps == "last" else "all", label)
+            if method_scores is not None:
+                rows += estimate(method_scores, task, reps=reps, confidence=confidence, seed=seed)
+    return rows
+
+
+def run_summary(episodes: Records) -> list[dict[str, Any]]:
+    """Per run and checkpoint: episodes, ``mean`` and ``iqm`` of the return over the run's episodes, ``metric`` and
+    ``metric_reference`` (means; None where empty). Sorted by run, then step."""
+    keys, group = _groups(episodes, (*RUN_KEYS, "step"))
+    order = np.argsort(group, kind="stable")
+    bounds = np.searchsorted(group[order], np.arange(len(keys) + 1))
+    rows = []
+    for index in range(len(keys)):
+        members = order[bounds[index] : bounds[index + 1]]
+        first = members[0]
+        returns = episodes["return"][members]
+        rows.append(
+            {
+                "run": str(episodes["run"][first]),
+                "method": str(episodes["method"][first]),
+                "task": str(episodes["task"][first]),
+                "env_id": str(episodes["env_id"][first]),
+                "step": int(episodes["step"][first]),
+                "episodes": len(members),
+                "mean": float(np.mean(returns)),
+                "iqm": stats.iqm(returns),
+                "metric": _mean_or_none(episodes["metric"][members]),
+                "metric_reference": _mean_or_none(episodes["metric_reference"][members]),
+            }
+        )
+    return rows
+
+
+def _mean_or_none(values: np.ndarray) -> float | None:
+    present = values[np.isfinite(values)]
+    return float(np.mean(present)) if len(present) else None
+
+
+def summarize(
+    episodes: Records, column: str = "metric", reps: int = 2000, confidence: float = 0.95, seed: int = 0
+) -> dict[str, Any]:
+    """What the evaluation writes to ``summary.json``: the per-run summary and the aggregate rows (JSON-ready)."""
+    return {
+        "runs": run_summary(episodes),
+        "aggregate": aggregate(episodes, column=column, reps=reps, confidence=confidence, seed=seed),
+        "aggregate_of": {
+            "column": column,
+            "statistic": "iqm",
+            "interval": "stratified bootstrap, percentile",
+            "confidence": confidence,
+            "reps": reps,
+            "seed": seed,
+        },
+    }
+
+
+def training_curves(
+    training: Records, column: str = "return", points: int = 100, smoothing: float = 0.02
+) -> dict[tuple[str, str], MethodScores]:
+    """Training curves per (method, task): every run's log smoothed lightly and read on one grid of steps.
+
+    Each run's finite values of ``column`` are averaged over a centred window of ``smoothing`` x its updates (at least
+    one), then interpolated linearly at ``points`` evenly spaced steps (fewer for short logs) from the latest first
+    step to the earliest last step of the runs (runs that end earlier cut the curve, with a warning).
+    """
+    found: dict[tuple[str, str], MethodScores] = {}
+    keys, _ = _groups(training, ("method", "task"))
+    for method, task in zip(keys["method"].tolist(), keys["task"].tolist(), strict=True):
+        rows = training.where(method=method, task=task)
+        label = f"training of method {method!r}, task {task!r}"
+        logs = {}
+        for run in np.unique(rows["run"]).tolist():
+            of_run = rows.where(run=run)
+            order = np.argsort(of_run["step"], kind="stable")
+            steps, values = of_run["step"][order].astype(np.float64), np.asarray(of_run[column], float)[order]
+            keep = np.isfinite(values)
+            if keep.any():
+                logs[run] = (steps[keep], _moving_average(values[keep], max(1, round(smoothing * keep.sum()))))
+        if not logs:
+            _warn(f"{label}: column {column!r} is empty; left out")
+            continue
+        start = max(steps[0] for steps, _ in logs.values())
+        ends = sorted({steps[-1] for steps, _ in logs.values()})
+        if ends[0] < start:
+            _warn(f"{label}: the runs' logs do not overlap; left out")
+            continue
+        if len(ends) > 1:
+            _warn(
+                f"{label}: logs end at different steps ({ends[0]:.0f} to {ends[-1]:.0f}); curves cut at {ends[0]:.0f}"
+            )
+        count = max(1, min(points, min(len(steps) for steps, _ in logs.values())))
+        grid = np.linspace(start, ends[0], count)
+        names = tuple(logs)
+        column_values = np.stack([np.interp(grid, *logs[run]) for run in names])
+        steps = np.broadcast_to(np.round(grid).astype(np.int64), column_values.shape).copy()
+        found[(method, task)] = MethodScores(method, (task,), (names,), (steps,), (column_values,), None)
+    return found
+
+
+def _moving_average(values: np.ndarray, window: int) -> np.ndarray:
+    """Centred moving average; the window shrinks at the ends instead of padding."""
+    if window <= 1:
+        return values
+    kernel = np.ones(window)
+    return np.convolve(values, kernel, mode="same") / np.convolve(np.ones_like(values), kernel, mode="same")
+
+
+def format_table(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> str:
+    """Rows as an aligned text table (floats with 4 decimals)."""
+    rows = list(rows)
+    if not rows:
+        return "(no rows)"
+    columns = list(columns or rows[0])
+
+    def cell(value: Any) -> str:
+        if value is None:
+            return "-"
+        if isinstance(value, float):
+            return f"{value:.4f}"
+        return str(value)
+
+    table = [columns] + [[cell(row.get(name)) for name in columns] for row in rows]
+    widths = [max(len(line[i]) for line in table) for i in range(len(columns))]
+    return "\n".join("  ".join(text.rjust(width) for text, width in zip(line, widths, strict=True)) for line in table)
