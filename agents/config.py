@@ -535,7 +535,8 @@ def _check_cross_fields(config: Config) -> None:
 
 # --------------------------------------------------------------------------------------------------- grids
 NAMED_AXES = ("method", "task")  # axes whose values are named bundles; a bundle sets run.<axis> to its name
-GRID_SETTINGS = ("panel", "slurm")  # grid keys that are not axes
+PANEL, SLURM = "panel", "slurm"
+GRID_SETTINGS = (PANEL, SLURM)  # grid keys that are not axes
 RESERVED_NAMES = ("results", "slurm")  # sub-directories of a panel's directory that runs cannot take
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+=-]*\Z")
 
@@ -576,7 +577,7 @@ def expand_grid(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> list[G
             grid = holder["grid"]
         else:
             late.append((key, value))
-    if GRID_SETTINGS[1] in grid:
+    if SLURM in grid:
         grid_slurm(grid)
     grid_panel(grid)
     axes = _grid_axes(grid, base)
@@ -608,7 +609,7 @@ def expand_grid(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> list[G
 
 def grid_panel(grid: Mapping[str, Any]) -> str | None:
     """The panel name a grid gives itself (``grid.panel``), or None."""
-    panel = grid.get(GRID_SETTINGS[0])
+    panel = grid.get(PANEL)
     if panel is None:
         return None
     if not isinstance(panel, str):
@@ -619,7 +620,7 @@ def grid_panel(grid: Mapping[str, Any]) -> str | None:
 
 def grid_slurm(grid: Mapping[str, Any]) -> SlurmConfig:
     """The cluster settings of a grid (``grid.slurm``; defaults when absent), validated."""
-    return _build(SlurmConfig, grid.get(GRID_SETTINGS[1]) or {}, prefix="grid.slurm")
+    return _build(SlurmConfig, grid.get(SLURM) or {}, prefix="grid.slurm")
 
 
 def check_name(key: str, name: str) -> None:
@@ -739,7 +740,7 @@ def _apply_override(tree: dict, key: str, value: Any) -> None:
     if not isinstance(grid, dict):
         grid = tree["grid"] = {}
     setting, _, sub = rest.partition(".")
-    if setting == GRID_SETTINGS[1] and sub:
+    if setting == SLURM and sub:
         if not isinstance(grid.get(setting), dict):
             grid[setting] = {}
         grid[setting][sub] = value

@@ -51,6 +51,7 @@ import yaml
 
 from agents.checkpoint import checkpoint_update, latest_checkpoint, run_config
 from agents.config import (
+    GRID_SETTINGS,
     NAMED_AXES,
     Config,
     ConfigError,
@@ -873,7 +874,7 @@ def describe(panels: Sequence[Panel], *, width: int = 40) -> str:
 def _axes_lines(panel: Panel) -> list[str]:
     lines = []
     for axis, values in panel.grid.items():
-        if axis in ("panel", "slurm"):
+        if axis in GRID_SETTINGS:
             continue
         if isinstance(values, dict):
             for index, (name, bundle) in enumerate(values.items()):
