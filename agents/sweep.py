@@ -529,6 +529,8 @@ def slurm_executor(panel: Panel, cluster: str | None = None) -> Any:
         import submitit
     except ImportError as err:
         raise SweepError('the SLURM launcher needs submitit: pip install -e ".[slurm]"') from err
+    if cluster in (None, "slurm") and shutil.which("sbatch") is None:
+        raise SweepError("no SLURM here (sbatch not found); --slurm-cluster local runs the jobs on this machine")
     slurm = panel.slurm
     executor = submitit.AutoExecutor(
         folder=panel.slurm_dir,
