@@ -1,7 +1,8 @@
 """Typed, documented training configuration loaded from YAML.
 
-A config file has the blocks ``env``, ``model``, ``ppo`` and ``run`` (and an optional ``grid`` reserved for sweeps);
-every block is a dataclass below and every field documents itself. Loading is strict: an unknown key fails with the
+A config file has the blocks ``env``, ``model``, ``ppo``, ``run`` and ``eval`` (and an optional ``grid`` that
+``scripts/sweep.py`` expands into runs: see "Grids" below); every block is a dataclass below and every field documents
+itself. Loading is strict: an unknown key fails with the
 closest valid name, a value of the wrong type or outside its range fails with what would have been valid.
 Command-line overrides (``--set ppo.gamma=0.995``) are parsed as YAML scalars and validated the same way.
 
@@ -11,14 +12,41 @@ Example::
     model: {memory: gru, memory_size: 64, hidden_size: 64}
     ppo:   {learning_rate: {initial: 3.0e-4, final: 1.0e-4}, sequence_length: max}
     run:   {total_steps: 200000, workers: 16, worker_steps: 64, seed: 1}
+
+Grids. A ``grid:`` block turns one file into a set of runs (one figure panel): the product of its axes.
+
+* A **plain axis** is a dotted key with a list of values: ``run.seed: [0, 1, 2]``, ``ppo.gamma: [0.99, 0.995]``, or a
+  whole block ``model.helm: [{lm: none}, {lm: random}]`` (a mapping value replaces that block; keys it omits take
+  their defaults, not the base file's).
+* A **named axis** (``method`` or ``task``) maps names to bundles of overrides, so that one value sets several keys::
+
+      grid:
+        method:
+          ppo:    {model.memory: none}
+          stack4: {model.memory: none, model.frame_stack: 4}
+        task:
+          mmact_grid: {env.id: MortarMayhemB-Grid-v0, env.options: {}}
+        run.seed: [0, 1, 2, 3, 4]
+
+  A bundle sets ``run.method`` / ``run.task`` to its name (the names in records and plots), then its own keys.
+* ``panel:`` names the panel (default: the file's stem); ``slurm:`` holds the cluster settings of the sweep
+  (:class:`SlurmConfig`).
+
+Override order, lowest first: the base file (everything outside ``grid``) < the bundles, axis by axis in the order
+the file lists the named axes (a bundle's keys in its own order) < the plain axes, in file order < command-line
+``--set`` overrides. ``--set grid.AXIS=VALUE`` replaces an axis (``--set grid.run.seed=[0]``) and
+``--set grid.slurm.KEY=VALUE`` one cluster setting, before the grid is expanded. Loading a grid config expands it and
+validates every point (:func:`expand_grid`): an error names the point, the axis and bundle, and the key.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import difflib
+import itertools
 import math
 import numbers
+import re
 import types
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -171,15 +199,49 @@ class EvalConfig:
 
 
 @dataclass
+class SlurmConfig:
+    """Cluster settings of a sweep (``grid.slurm``; ``scripts/sweep.py --slurm-*`` options override them). One run is
+    one job; the jobs of a sweep form a job array."""
+
+    partition: str = param("", "SLURM partition (empty: the cluster's default)")
+    time: int | str = param(
+        "",
+        "time limit per job, quoted: '[D-]HH:MM:SS' or 'MINUTES' (empty: 24:00:00); a run that needs longer is "
+        "requeued and resumes from its last checkpoint",
+        expect="a quoted time limit, e.g. '24:00:00'",
+    )
+    gpus_per_job: int = param(0, "GPUs per job", low=0)
+    cpus_per_job: int = param(
+        0, "CPU cores per job (0: the cluster's default); new runs get as many torch threads", low=0
+    )
+    mem_gb: float = param(0.0, "memory per job in GB (0: the cluster's default)", low=0.0)
+    array_parallelism: int = param(0, "array tasks allowed to run at once (0: submitit's default, 256)", low=0)
+    account: str = param("", "account to charge (sbatch --account)")
+    qos: str = param("", "quality of service (sbatch --qos)")
+    constraint: str = param("", "node features (sbatch --constraint)")
+    max_requeues: int = param(20, "times a timed-out job is requeued (pre-emptions are not counted)", low=0)
+    setup: list[str] = param([], "shell lines run before each job, e.g. 'source .venv/bin/activate'")
+    additional: dict[str, Any] = param({}, "further sbatch options, {name: value} (e.g. {mail-type: END})")
+
+    @property
+    def timeout_min(self) -> int:
+        """The time limit in minutes (24 h when unset)."""
+        return slurm_minutes(self.time) if self.time != "" else 24 * 60
+
+
+@dataclass
 class Config:
-    """A whole training run. ``grid`` (dotted key -> list of values) is expanded by the sweep tool, not here."""
+    """A whole training run. ``grid`` (see "Grids" in the module docstring) is expanded by :func:`expand_grid` for
+    ``scripts/sweep.py``; a config that has one is not a single run."""
 
     env: EnvConfig = param(EnvConfig(), "environment")
     model: ModelConfig = param(ModelConfig(), "actor-critic model")
     ppo: PPOConfig = param(PPOConfig(), "PPO hyperparameters")
     run: RunConfig = param(RunConfig(), "run length, width, device and seed")
     eval: EvalConfig = param(EvalConfig(), "evaluation on novel seeds during training")
-    grid: dict[str, list] = param({}, "swept keys for scripts/sweep.py: {dotted.key: [values]}")
+    grid: dict[str, Any] = param(
+        {}, "runs for scripts/sweep.py: plain axes {dotted.key: [values]}, named axes method/task, panel, slurm"
+    )
 
     @property
     def batch_size(self) -> int:
@@ -228,13 +290,20 @@ def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Config:
 
 
 def config_from_dict(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> Config:
-    """Build a validated :class:`Config` from nested dicts plus ``key=value`` overrides."""
+    """Build a validated :class:`Config` from nested dicts plus ``key=value`` overrides.
+
+    With a ``grid`` block the result is the base of the grid (base file plus overrides, each block validated), and
+    every point of the grid is expanded and validated as a whole config (:func:`expand_grid`)."""
+    overrides = list(overrides)
     merged = _deep_copy(raw)
     for item in overrides:
         key, value = parse_override(item)
-        _set_dotted(merged, key, value)
+        _apply_override(merged, key, value)
     config = _build(Config, merged, prefix="")
-    _check_cross_fields(config)
+    if not config.grid:
+        _check_cross_fields(config)
+        return config
+    expand_grid(raw, overrides)
     return config
 
 
@@ -405,6 +474,14 @@ def _check_block(block: Any, prefix: str) -> None:
         length = block.sequence_length
         if isinstance(length, str) and length != "max" or isinstance(length, int) and length < 1:
             raise ConfigError(f"{prefix}.sequence_length={length!r} is invalid: expected an int >= 1 or 'max'")
+    elif isinstance(block, SlurmConfig):
+        if isinstance(block.time, int):  # YAML 1.1 reads an unquoted 24:00:00 as the integer 86400
+            raise ConfigError(
+                f"{prefix}.time={block.time!r} is invalid: write the time limit as a quoted string, e.g. '24:00:00' "
+                "or '90' (minutes); unquoted, YAML reads 24:00:00 as the number 86400"
+            )
+        if block.time != "":
+            slurm_minutes(block.time, f"{prefix}.time")
     elif isinstance(block, RunConfig):
         _choice(f"{prefix}.precision", block.precision, ("fp32", "bf16"))
         device = block.device
@@ -454,16 +531,227 @@ def _check_cross_fields(config: Config) -> None:
             "with model.memory=none use 'max' or 1 (every step is its own sequence)"
         )
     check_disjoint_seeds(config.env.train_seeds, config.eval_seeds)
-    for key, values in config.grid.items():
-        if not isinstance(values, list) or not values:
-            raise ConfigError(f"grid.{key}={values!r} is invalid: expected a non-empty list of values")
+
+
+# --------------------------------------------------------------------------------------------------- grids
+NAMED_AXES = ("method", "task")  # axes whose values are named bundles; a bundle sets run.<axis> to its name
+PANEL, SLURM = "panel", "slurm"
+GRID_SETTINGS = (PANEL, SLURM)  # grid keys that are not axes
+RESERVED_NAMES = ("results", "slurm")  # sub-directories of a panel's directory that runs cannot take
+_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+=-]*\Z")
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    """One point of a grid: its choice on every axis and the whole config it makes.
+
+    ``choices``: ``(axis, label)`` per axis in application order (named axes, then plain axes), the label being the
+    bundle's name or the plain value written as YAML. ``overrides``: ``(dotted key, value, source)`` in the order they
+    were applied (``source`` names the grid entry, e.g. ``grid.method.stack4`` or ``grid.run.seed``); command-line
+    overrides come after them and are not listed."""
+
+    choices: tuple[tuple[str, str], ...]
+    overrides: tuple[tuple[str, Any, str], ...]
+    config: Config
+
+    def choice(self, axis: str) -> str | None:
+        """The label of ``axis`` at this point (None when the grid has no such axis)."""
+        return dict(self.choices).get(axis)
+
+
+def expand_grid(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> list[GridPoint]:
+    """Every point of the grid of ``raw`` (a config with a ``grid`` block) as a validated config, in product order
+    (the first axis varies slowest). ``overrides``: ``key=value`` items; ``grid.AXIS=...`` ones change the grid,
+    the others apply to every point last. A config without a grid is one point."""
+    base = _deep_copy(dict(raw))
+    grid = base.pop("grid", None) or {}
+    if not isinstance(grid, Mapping):
+        raise ConfigError(f"grid must be a mapping of axes to values, got {grid!r}")
+    grid = _deep_copy(dict(grid))
+    late = []
+    for item in overrides:
+        key, value = parse_override(item)
         if key.split(".")[0] == "grid":
-            raise ConfigError(f"grid.{key}: the grid cannot sweep itself")
-        for value in values:  # every swept value must make a valid config on its own
-            trial = config_to_dict(config)
-            trial["grid"] = {}
-            _set_dotted(trial, key, value)
-            _check_cross_fields(_build(Config, trial, prefix=""))
+            holder = {"grid": grid}
+            _apply_override(holder, key, value)
+            grid = holder["grid"]
+        else:
+            late.append((key, value))
+    if SLURM in grid:
+        grid_slurm(grid)
+    grid_panel(grid)
+    axes = _grid_axes(grid, base)
+    points = []
+    for combination in itertools.product(*(options for _, options in axes)):
+        tree = _deep_copy(base)
+        applied = []
+        for (axis, _), (label, sets) in zip(axes, combination, strict=True):
+            source = f"grid.{axis}.{label}" if axis in NAMED_AXES else f"grid.{axis}"
+            for key, value in sets:
+                _set_dotted(tree, key, _deep_copy(value))
+                applied.append((key, value, source))
+        for key, value in late:
+            _set_dotted(tree, key, _deep_copy(value))
+        choices = tuple((axis, label) for (axis, _), (label, _) in zip(axes, combination, strict=True))
+        try:
+            config = _build(Config, tree, prefix="")
+            _check_cross_fields(config)
+        except ConfigError as err:
+            where = ", ".join(f"{axis}={label}" for axis, label in choices)
+            by_source: dict[str, list[str]] = {}
+            for key, value, source in applied:
+                by_source.setdefault(source, []).append(f"{key}={_flow(value)}")
+            sets = "; ".join(f"{source} sets {', '.join(items)}" for source, items in by_source.items())
+            raise ConfigError(f"grid point ({where}) is invalid: {err} [{sets}]") from err
+        points.append(GridPoint(choices, tuple(applied), config))
+    return points
+
+
+def grid_panel(grid: Mapping[str, Any]) -> str | None:
+    """The panel name a grid gives itself (``grid.panel``), or None."""
+    panel = grid.get(PANEL)
+    if panel is None:
+        return None
+    if not isinstance(panel, str):
+        raise ConfigError(f"grid.panel={panel!r} is invalid: expected a name")
+    check_name("grid.panel", panel)
+    return panel
+
+
+def grid_slurm(grid: Mapping[str, Any]) -> SlurmConfig:
+    """The cluster settings of a grid (``grid.slurm``; defaults when absent), validated."""
+    return _build(SlurmConfig, grid.get(SLURM) or {}, prefix="grid.slurm")
+
+
+def check_name(key: str, name: str) -> None:
+    """A panel, bundle or value name is one path component of run directories: letters, digits and ``_.+=-``."""
+    if not _NAME.match(name) or name in RESERVED_NAMES:
+        reserved = f" and not one of {', '.join(RESERVED_NAMES)}" if name in RESERVED_NAMES else ""
+        raise ConfigError(
+            f"{key}: {name!r} cannot name a directory: expected letters, digits and _.+=-, starting with a letter "
+            f"or a digit{reserved}"
+        )
+
+
+def slurm_minutes(value: int | str, key: str = "slurm.time") -> int:
+    """A SLURM time limit (minutes, ``MM``, ``HH:MM:SS``, ``D-HH:MM:SS``, ``D-HH``...) in whole minutes (>= 1)."""
+    if isinstance(value, bool):
+        value = "?"
+    if isinstance(value, int):
+        minutes = value
+    else:
+        days, _, clock = str(value).strip().rpartition("-")
+        parts = clock.split(":")
+        try:
+            numbers_ = [int(part) for part in parts]
+            day_count = int(days) if days else 0
+        except ValueError:
+            numbers_, day_count = [], 0
+        if not numbers_ or len(numbers_) > 3 or any(n < 0 for n in numbers_):
+            raise ConfigError(f"{key}={value!r} is invalid: expected minutes or [D-]HH:MM:SS, e.g. 12:00:00")
+        if days:  # D-HH, D-HH:MM, D-HH:MM:SS
+            hours, minutes_, seconds = (numbers_ + [0, 0])[:3]
+        elif len(numbers_) == 1:  # MM
+            hours, minutes_, seconds = 0, numbers_[0], 0
+        elif len(numbers_) == 2:  # MM:SS
+            hours, minutes_, seconds = 0, numbers_[0], numbers_[1]
+        else:
+            hours, minutes_, seconds = numbers_
+        minutes = day_count * 1440 + hours * 60 + minutes_ + math.ceil(seconds / 60)
+    if minutes < 1:
+        raise ConfigError(f"{key}={value!r} is invalid: expected at least one minute")
+    return minutes
+
+
+def _grid_axes(grid: Mapping[str, Any], base: Mapping[str, Any]) -> list[tuple[str, list[tuple[str, list]]]]:
+    """The axes of a grid in application order: ``(axis, [(label, [(key, value), ...]), ...])``, named axes first
+    (file order), then plain axes (file order). Checks names and keys; values are checked with the whole point."""
+    named, plain = [], []
+    for axis, values in grid.items():
+        axis = str(axis)
+        if axis in GRID_SETTINGS:
+            continue
+        if axis in NAMED_AXES:
+            named.append((axis, _bundles(axis, values, base)))
+            continue
+        if "." not in axis:
+            raise ConfigError(
+                f"grid.{axis} is not a grid key: expected a dotted config key with a list of values (e.g. run.seed), "
+                f"a named axis ({', '.join(NAMED_AXES)}) or a setting ({', '.join(GRID_SETTINGS)})"
+            )
+        if axis.split(".")[0] == "grid":
+            raise ConfigError(f"grid.{axis}: the grid cannot sweep itself")
+        if not isinstance(values, list) or not values:
+            raise ConfigError(f"grid.{axis}={values!r} is invalid: expected a non-empty list of values")
+        _check_grid_key(f"grid.{axis}", axis, values[0], base)
+        labels = [_flow(value) for value in values]
+        for label in labels:
+            if labels.count(label) > 1:
+                raise ConfigError(f"grid.{axis} lists the value {label} more than once")
+        plain.append((axis, [(label, [(axis, value)]) for label, value in zip(labels, values, strict=True)]))
+    return named + plain
+
+
+def _bundles(axis: str, values: Any, base: Mapping[str, Any]) -> list[tuple[str, list]]:
+    if not isinstance(values, Mapping) or not values:
+        raise ConfigError(
+            f"grid.{axis}={values!r} is invalid: expected a mapping of names to bundles of overrides, "
+            f"e.g. {{gru: {{model.memory: gru}}}}"
+        )
+    bundles = []
+    for name, bundle in values.items():
+        name = str(name)
+        check_name(f"grid.{axis}.{name}", name)
+        bundle = {} if bundle is None else bundle
+        if not isinstance(bundle, Mapping):
+            raise ConfigError(
+                f"grid.{axis}.{name}={bundle!r} is invalid: expected a mapping of dotted keys to values, "
+                "e.g. {model.memory: none, model.frame_stack: 4}"
+            )
+        sets = [(f"run.{axis}", name)]
+        for key, value in bundle.items():
+            key = str(key)
+            if key.split(".")[0] == "grid":
+                raise ConfigError(f"grid.{axis}.{name}: a bundle cannot set the grid ({key})")
+            _check_grid_key(f"grid.{axis}.{name}", key, value, base)
+            sets.append((key, value))
+        bundles.append((name, sets))
+    return bundles
+
+
+def _check_grid_key(where: str, key: str, value: Any, base: Mapping[str, Any]) -> None:
+    """That ``key`` names a config field (with a suggestion when it does not), whatever the other axes choose."""
+    try:
+        _set_dotted(_deep_copy(dict(base)), key, _deep_copy(value))
+    except ConfigError as err:
+        raise ConfigError(f"{where}: {err}") from err
+
+
+def _apply_override(tree: dict, key: str, value: Any) -> None:
+    """``_set_dotted``, except that ``grid.AXIS`` names an axis (its dots belong to the axis) and
+    ``grid.slurm.KEY`` one cluster setting."""
+    if key.split(".")[0] != "grid":
+        _set_dotted(tree, key, value)
+        return
+    rest = key[len("grid.") :]
+    if not rest:
+        raise ConfigError(f"override {key!r}: name the grid entry, e.g. grid.run.seed=[0, 1]")
+    grid = tree.get("grid")
+    if not isinstance(grid, dict):
+        grid = tree["grid"] = {}
+    setting, _, sub = rest.partition(".")
+    if setting == SLURM and sub:
+        if not isinstance(grid.get(setting), dict):
+            grid[setting] = {}
+        grid[setting][sub] = value
+    else:
+        grid[rest] = value
+
+
+def _flow(value: Any) -> str:
+    """A value as one line of YAML (``0.99``, ``max``, ``[0, 9]``, ``{lm: random}``)."""
+    text = yaml.safe_dump(value, default_flow_style=True, width=10_000, sort_keys=False).strip()
+    return text[: -len("\n...")].strip() if text.endswith("\n...") else text.removesuffix("...").strip()
 
 
 def _choice(key: str, value: str, choices: tuple[str, ...]) -> None:
