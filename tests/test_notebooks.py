@@ -1,22 +1,20 @@
 """notebooks/plots.ipynb executes headless, as committed, from the repository root (nbclient, kernel python3).
 
-It always runs on a synthetic results directory handed over through MEMORY_GYM_RESULTS. Once the example results
-directory is committed (results/examples/proof_of_memory/episodes.csv), it also runs on that default; until then a
-warning in the test summary says that this half did not run.
+It runs on a synthetic results directory handed over through MEMORY_GYM_RESULTS, and on its default, the committed
+example results (results/examples/proof_of_memory/, produced by configs/examples/proof_of_memory.yaml).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import warnings
 from pathlib import Path
 
 import nbformat
 import pytest
 from nbclient import NotebookClient
 
-from tests.synthetic_results import write_results
+from tests.support.synthetic_results import write_results
 
 ROOT = Path(__file__).resolve().parent.parent
 NOTEBOOK = ROOT / "notebooks" / "plots.ipynb"
@@ -65,11 +63,4 @@ def test_committed_notebook_has_no_outputs() -> None:
 def test_notebook_executes(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     synthetic = write_results(tmp_path / "results", methods=("ppo", "gru"))
     check_shows_results(execute(monkeypatch, synthetic), {"ppo", "gru"})
-    if (DEFAULT_RESULTS / "episodes.csv").exists():
-        check_shows_results(execute(monkeypatch, None), set())
-    else:  # not skipped in silence: the test summary lists this until the example directory is committed
-        warnings.warn(
-            f"{DEFAULT_RESULTS.relative_to(ROOT)}/episodes.csv is not committed yet: the notebook ran on synthetic "
-            "results only",
-            stacklevel=1,
-        )
+    check_shows_results(execute(monkeypatch, None), {"ppo", "gru", "stack4", "stack16", "helm"})

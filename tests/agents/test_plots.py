@@ -10,7 +10,7 @@ from matplotlib.colors import to_hex
 
 from agents import plots, results
 from agents.metrics import METRICS
-from tests.synthetic_results import write_results
+from tests.support.synthetic_results import write_results
 
 
 def test_known_methods_keep_their_colour_in_any_company() -> None:

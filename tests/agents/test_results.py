@@ -11,7 +11,7 @@ import pytest
 
 from agents import results, stats
 from agents.results import EPISODE_COLUMNS, ResultsWarning
-from tests.synthetic_results import episode_rows, training_rows, write_csv, write_results
+from tests.support.synthetic_results import episode_rows, training_rows, write_csv, write_results
 
 
 @pytest.fixture

@@ -9,7 +9,7 @@ from matplotlib.image import imread
 
 from agents.results import EPISODE_COLUMNS
 from scripts import plot
-from tests.synthetic_results import episode_rows, write_csv, write_results
+from tests.support.synthetic_results import episode_rows, write_csv, write_results
 
 FIGURES = ["curves.pdf", "curves.png", "final.pdf", "final.png"]
 
