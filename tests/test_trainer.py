@@ -18,7 +18,7 @@ from agents.models import log_probs_and_entropy
 from agents.sequences import pad_sequences, split_sequences
 from agents.trainer import Trainer, TrainingDiverged, latest_checkpoint
 from scripts import train as train_script
-from tests.dict_env import DictCore
+from tests.support.dict_env import DictCore
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},

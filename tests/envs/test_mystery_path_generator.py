@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import envs
-from envs.mystery_path_generator import generate_path
+from envs.mystery_path.generator import generate_path
 from envs.rng import seeded_generator
 from scripts.trace_format import load_mp_paths
 

@@ -8,7 +8,7 @@ import pytest
 
 import envs
 from envs.mystery_path import TILE, MysteryPathCore
-from tests.batching import check_batched_equals_singles, check_vector_env_matches_singles
+from tests.support.batching import check_batched_equals_singles, check_vector_env_matches_singles
 
 IDS = ["MysteryPath-v0", "MysteryPath-Grid-v0", "Endless-MysteryPath-v0"]
 RED = np.array([255, 0, 0], dtype=np.uint8)
@@ -464,7 +464,7 @@ def test_vector_env_matches_single_envs(env_id: str) -> None:
 
 def _reference_segments(rng: np.random.Generator, count: int) -> list[list[tuple[int, int]]]:
     """The reference's endless reset: start row, then per segment a goal row and a level (8 columns apart)."""
-    from envs.mystery_path_generator import generate_path
+    from envs.mystery_path.generator import generate_path
 
     segments, start = [], int(rng.integers(0, 7))
     for s in range(count):

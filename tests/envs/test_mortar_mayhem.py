@@ -17,7 +17,7 @@ from envs.mortar_mayhem import (
     walk_commands,
 )
 from envs.rng import BoundedDraws, seeded_generator
-from tests.batching import check_batched_equals_singles
+from tests.support.batching import check_batched_equals_singles
 
 MM, MM_GRID, MMB, MMB_GRID, EMM = (
     "MortarMayhem-v0",
