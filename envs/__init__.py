@@ -53,7 +53,10 @@ def _register_all() -> None:
             entry_point="envs.core:MemoryGymEnv",
             vector_entry_point="envs.core:MemoryGymVectorEnv",
             kwargs={"core": core, **variant},
-            disable_env_checker=False,
+            # gymnasium's passive checker is off by default: after a first reset that raised, gymnasium 1.4's
+            # PassiveEnvChecker fails every later step (it compares with the reset data it never got). The test
+            # suite runs gymnasium's full check_env on every id; disable_env_checker=False still turns it on.
+            disable_env_checker=True,
         )
 
 

@@ -21,6 +21,13 @@ What a family implements (``idx`` is ``slice(None)`` for all slots or an int arr
 * ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here), or
   ``_final_infos(slots)`` for several finished slots at once (by default a loop over ``_final_info``);
 * optionally ``_step_info(k)`` (endless envs: ``ground_truth``), ``_debug_frame(k)`` and ``render_fps(k)``.
+
+Every face goes through :meth:`BatchedCore.step`, which refuses what a family must never see, before it changes any
+state: a step of a slot that has no episode (never reset, or its last reset failed) raises
+``gymnasium.error.ResetNeeded``, and actions outside the action space raise ``ValueError`` naming the slot, the action
+and the space. Actions are integer arrays, one row per stepped slot (``(n,)`` for ``Discrete``, ``(n, branches)``
+for ``MultiDiscrete``); floats are refused, integer-valued ones too (a float action is almost always a bug, such as
+passing probabilities; gymnasium's ``Discrete.contains`` refuses floats as well): cast with ``astype(int)``.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
@@ -42,6 +50,7 @@ __all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_c
 
 Index = slice | np.ndarray
 _SEED_TYPES = (int, np.integer)
+_UNSIGNED = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}  # integer itemsize -> unsigned of that size
 RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
 DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
 
@@ -68,6 +77,8 @@ class BatchedCore:
         self.slot_options: list[dict[str, Any]] = [dict(self.base_options) for _ in range(self.num_envs)]
         self.episode_return = np.zeros(self.num_envs, dtype=np.float64)
         self.episode_length = np.zeros(self.num_envs, dtype=np.int64)
+        self.unready: set[int] = set(range(self.num_envs))  # slots without an episode: never reset, or reset failed
+        self._action_bounds: tuple[tuple[int, ...], np.ndarray] | None = None  # see ``check_actions``
 
     # ----------------------------------------------------------------------------------------------- slot API
     def resolve(self, options: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -88,11 +99,12 @@ class BatchedCore:
         ``None``) per slot. The result equals :meth:`reset_slot` on each slot in turn, but a family may build the
         levels together (its ``_reset_slots`` hook), which saves the per-slot overhead when many episodes end at once.
         """
-        opts = self.resolve(options)  # validate before touching any state
         if isinstance(slots, np.ndarray):
             slots = slots.astype(np.int64, copy=False).tolist()
         else:
             slots = [int(k) for k in slots]
+        self.unready.update(slots)  # until the new episodes are built: a failed reset leaves no episode to step
+        opts = self.resolve(options)  # validate before touching any other state
         seeds = [None] * len(slots) if seeds is None else list(seeds)
         if len(seeds) != len(slots):
             raise ValueError(f"got {len(seeds)} seeds for {len(slots)} slots")
@@ -113,6 +125,7 @@ class BatchedCore:
             self.episode_return[slots] = 0.0
             self.episode_length[slots] = 0
             self._reset_slots(slots, rngs, opts)
+            self.unready.difference_update(slots)
 
     def step(
         self, actions: np.ndarray, idx: np.ndarray | None = None
@@ -120,10 +133,14 @@ class BatchedCore:
         """Advance slots ``idx`` (all when ``None``) by one step with ``actions`` (one row per stepped slot).
 
         Returns the rewards and terminated flags of the stepped slots and the final infos of the slots whose episode
-        ended, keyed by slot index.
+        ended, keyed by slot index. Raises ``ResetNeeded`` for a slot without an episode and ``ValueError`` for
+        actions outside the action space (see :meth:`check_actions`), before any state changes.
         """
         sel: Index = slice(None) if idx is None else np.asarray(idx, dtype=np.int64)
-        rewards, terminated = self._step(sel, np.asarray(actions))
+        if self.unready:
+            self._check_ready(sel)
+        actions = self.check_actions(actions, sel)
+        rewards, terminated = self._step(sel, actions)
         self.episode_return[sel] += rewards
         self.episode_length[sel] += 1
         finals: dict[int, dict] = {}
@@ -134,6 +151,35 @@ class BatchedCore:
             for k, reward, length, info in zip(done, returns, lengths, self._final_infos(done), strict=True):
                 finals[k] = {"reward": reward, "length": length, **info}
         return rewards, terminated, finals
+
+    def check_actions(self, actions: Any, idx: Index = slice(None)) -> np.ndarray:
+        """``actions`` as an array, if it holds one valid action per slot of ``idx``; else ``ValueError``.
+
+        One vectorised test: the shape, an integer dtype, and every entry below its bound once viewed as unsigned
+        (negative entries become huge). The message of a refusal names the slot, the action and the valid space.
+        """
+        if not isinstance(actions, np.ndarray):
+            actions = _as_array(actions, self.single_action_space)
+        bounds = self._action_bounds
+        if bounds is None:
+            bounds = self._action_bounds = _action_bounds(self.single_action_space)
+        row_shape, high = bounds
+        if (
+            actions.shape != (self.num_envs if isinstance(idx, slice) else len(idx), *row_shape)
+            or actions.dtype.kind not in "iu"
+            or np.count_nonzero(actions.view(_UNSIGNED[actions.itemsize]) >= high)
+        ):
+            raise ValueError(_action_error(actions, self.slots(idx), self.single_action_space))
+        return actions
+
+    def _check_ready(self, sel: Index) -> None:
+        waiting = sorted(self.unready.intersection(self.slots(sel).tolist()))
+        if waiting:
+            which = f"slot {waiting[0]}" if len(waiting) == 1 else f"slots {', '.join(map(str, waiting[:8]))}"
+            raise ResetNeeded(
+                f"{which} of {self.env_name or type(self).__name__} has no episode to step (never reset, or the last "
+                "reset failed): call reset first"
+            )
 
     def observations(self, idx: np.ndarray | None = None) -> np.ndarray | dict[str, np.ndarray]:
         """Copies of the current observations of the slots ``idx`` (all when ``None``)."""
@@ -192,6 +238,54 @@ class BatchedCore:
 
     def _debug_frame(self, k: int) -> np.ndarray:
         return self.agent_frame(k)
+
+
+def _action_bounds(space: gym.Space) -> tuple[tuple[int, ...], np.ndarray]:
+    """The shape of one action and the (exclusive) upper bound of each of its entries, for :meth:`check_actions`."""
+    if isinstance(space, gym.spaces.Discrete) and space.start == 0:
+        return (), np.array(space.n, dtype=np.uint64)
+    if isinstance(space, gym.spaces.MultiDiscrete) and not np.any(space.start):
+        nvec = np.asarray(space.nvec, dtype=np.uint64)
+        uniform = np.all(nvec == nvec.flat[0])  # one bound for all entries: a comparison 4x cheaper than broadcast
+        return space.shape, np.array(nvec.flat[0]) if uniform else nvec
+    raise NotImplementedError(f"action checks cover Discrete and MultiDiscrete spaces starting at 0, not {space}")
+
+
+def _as_array(actions: Any, space: gym.Space) -> np.ndarray:
+    try:
+        return np.asarray(actions)
+    except ValueError as err:  # ragged nested sequences
+        raise ValueError(f"actions {actions!r} do not form an array of actions in {space}") from err
+
+
+def _describe_space(space: gym.Space) -> str:
+    if isinstance(space, gym.spaces.Discrete):
+        return f"{space} (an integer 0..{space.n - 1})"
+    if isinstance(space, gym.spaces.MultiDiscrete):
+        ranges = ", ".join(f"0..{n - 1}" for n in np.asarray(space.nvec).reshape(-1).tolist())
+        return f"MultiDiscrete({np.asarray(space.nvec).tolist()}) (integers [{ranges}])"
+    return str(space)
+
+
+def _action_error(actions: np.ndarray, slots: np.ndarray, space: gym.Space) -> str:
+    """Why ``actions`` (one row per slot of ``slots``) are refused: the first offending slot, its action, the space."""
+    valid = _describe_space(space)
+    row_shape = space.shape
+    if actions.shape[:1] != (len(slots),):
+        return (
+            f"got actions of shape {actions.shape} for {len(slots)} slots: expected one action per slot, an array of "
+            f"shape {(len(slots), *row_shape)}; each action in {valid}"
+        )
+    for k, action in zip(slots.tolist(), actions, strict=True):
+        value = action.tolist()
+        if action.shape != row_shape:
+            return f"slot {k}: action {value!r} has shape {action.shape}, expected {row_shape}: an action in {valid}"
+        if actions.dtype.kind not in "iu":
+            cast = " (integer-valued floats too: cast with astype(int))" if actions.dtype.kind == "f" else ""
+            return f"slot {k}: action {value!r} has dtype {actions.dtype}; actions are integers{cast}, in {valid}"
+        if not space.contains(action.astype(np.int64)):
+            return f"slot {k}: action {value!r} is outside the action space {valid}"
+    return f"actions {actions.tolist()!r} are outside the action space {valid}"
 
 
 def load_core(core: str | type[BatchedCore]) -> type[BatchedCore]:
@@ -272,7 +366,7 @@ class MemoryGymEnv(gym.Env):
         return self._obs(), self.core.step_info(0)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
-        rewards, terminated, finals = self.core.step(np.asarray(action)[None])
+        rewards, terminated, finals = self.core.step(_as_array(action, self.action_space)[None])
         info = self.core.step_info(0)
         info.update(finals.get(0, {}))
         if self.render_mode == "human":
@@ -369,12 +463,13 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         return seeds
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
-        actions = np.asarray(actions)
+        actions = _as_array(actions, self.action_space)
         n = self.num_envs
         rewards = np.zeros(n, dtype=np.float64)
         terminated = np.zeros(n, dtype=bool)
         infos: dict[str, Any] = {}
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
+            actions = self.core.check_actions(actions)  # all of them, also those of the restarting slots (ignored)
             restart = np.flatnonzero(self._needs_reset)
             live = np.flatnonzero(~self._needs_reset)
             if live.size:

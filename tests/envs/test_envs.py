@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 import gymnasium as gym
@@ -266,3 +267,95 @@ def test_registry_lists_every_id() -> None:
     for env_id in ALL_IDS:
         assert env_id in gym.registry
     assert envs.make_core(ALL_IDS[0], num_envs=2).num_envs == 2
+
+
+def bad_actions(space: gym.Space) -> list[tuple[Any, str]]:
+    """Single actions outside ``space``, each with a pattern of what the refusal names."""
+    if isinstance(space, gym.spaces.Discrete):
+        return [
+            (space.n, rf"action {space.n} is outside the action space Discrete\({space.n}\)"),
+            (-1, r"action -1 is outside"),
+            (1.0, r"action 1.0 has dtype float64; actions are integers \(integer-valued floats too"),
+            ([1], r"action \[1\] has shape \(1,\), expected \(\)"),
+            (True, r"action True has dtype bool"),
+        ]
+    high = int(space.nvec[0])
+    return [
+        (5, r"action 5 has shape \(\), expected \(2,\): an action in MultiDiscrete\(\[3, 3\]\)"),
+        ([high, 0], rf"action \[{high}, 0\] is outside the action space MultiDiscrete\(\[3, 3\]\)"),
+        ([0, -1], r"action \[0, -1\] is outside"),
+        ([1, 1, 1], r"action \[1, 1, 1\] has shape \(3,\), expected \(2,\)"),
+        (np.array([0.0, 1.0]), r"action \[0.0, 1.0\] has dtype float64"),
+    ]
+
+
+def replay_after(env: gym.Env, twin: gym.Env, steps: int, rng: np.random.Generator) -> None:
+    """``env`` (which refused actions) and ``twin`` (which never saw them) play on identically."""
+    for t in range(steps):
+        action = random_action(env.action_space, rng)
+        got, want = env.step(action), twin.step(action)
+        assert_step((got[0], *got[1:3], got[4]), (want[0], *want[1:3], want[4]), f"step {t} after the refusals")
+        if got[2]:
+            break
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_actions_outside_the_space_are_refused_without_changing_any_state(env_id: str) -> None:
+    env, twin = gym.make(env_id), gym.make(env_id)
+    env.reset(seed=3)
+    twin.reset(seed=3)
+    for t, (action, message) in enumerate(bad_actions(env.action_space)):
+        with pytest.raises(ValueError, match=rf"slot 0: {message}"):
+            env.step(action)
+        if t == 1:  # a valid step between refusals
+            action = random_action(env.action_space, np.random.default_rng(t))
+            assert_step(env.step(action)[:3] + (None,), twin.step(action)[:3] + (None,), "valid step")
+    replay_after(env, twin, 30, np.random.default_rng(1))
+
+    # the native vector face: the slot is named; the count and the shape of the batch are checked
+    venv, vtwin = gym.make_vec(env_id, num_envs=4), gym.make_vec(env_id, num_envs=4)
+    venv.reset(seed=5)
+    vtwin.reset(seed=5)
+    valid = np.stack([np.asarray(random_action(venv.single_action_space, np.random.default_rng(k))) for k in range(4)])
+    with pytest.raises(ValueError, match=r"got actions of shape \(3,.*for 4 slots"):
+        venv.step(valid[:3])
+    discrete = isinstance(venv.single_action_space, gym.spaces.Discrete)
+    for k, action in ((1, 9), (2, -3)) if discrete else ((1, [3, 0]), (2, [0, -3])):
+        batch = valid.copy()
+        batch[k] = action
+        with pytest.raises(ValueError, match=rf"slot {k}: action {re.escape(str(action))} is outside the action space"):
+            venv.step(batch)
+    with pytest.raises(ValueError, match=r"slot 0: .* has dtype float64"):
+        venv.step(valid.astype(np.float64))
+    rng = np.random.default_rng(2)
+    restarted = False
+    for _ in range(600):  # also while slots wait for their NEXT_STEP autoreset (their action is checked too)
+        batch = np.stack([np.asarray(random_action(venv.single_action_space, rng)) for _ in range(4)])
+        if venv._needs_reset.any():
+            k = int(np.flatnonzero(venv._needs_reset)[0])
+            wrong = batch.copy()
+            wrong[k] = -1
+            with pytest.raises(ValueError, match=rf"slot {k}: action .*-1"):
+                venv.step(wrong)
+            restarted = True
+        got, want = venv.step(batch), vtwin.step(batch)
+        np.testing.assert_array_equal(image_of(got[0]), image_of(want[0]))
+        assert got[1].tolist() == want[1].tolist() and got[2].tolist() == want[2].tolist()
+        assert same(got[4], want[4])
+        if restarted:
+            break
+    assert restarted
+
+    # the batched core (what the trainer drives), with and without an index of stepped slots
+    core, core_twin = make_core(env_id, num_envs=4), make_core(env_id, num_envs=4)
+    core.reset_slots(range(4), range(4))
+    core_twin.reset_slots(range(4), range(4))
+    action, message = bad_actions(core.single_action_space)[1]  # the shape of an action, a value outside
+    with pytest.raises(ValueError, match=rf"slot 3: {message}"):
+        core.step(np.stack([valid[0], np.asarray(action)]), idx=[1, 3])
+    with pytest.raises(ValueError, match=r"got actions of shape \(4,.*for 2 slots"):
+        core.step(valid, idx=[0, 1])
+    for _ in range(20):
+        got, want = core.step(valid), core_twin.step(valid)
+        assert got[0].tolist() == want[0].tolist() and got[1].tolist() == want[1].tolist()
+        np.testing.assert_array_equal(image_of(core.observations()), image_of(core_twin.observations()))
