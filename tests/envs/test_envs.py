@@ -359,3 +359,31 @@ def test_actions_outside_the_space_are_refused_without_changing_any_state(env_id
         got, want = core.step(valid), core_twin.step(valid)
         assert got[0].tolist() == want[0].tolist() and got[1].tolist() == want[1].tolist()
         np.testing.assert_array_equal(image_of(core.observations()), image_of(core_twin.observations()))
+
+
+def test_readme_table_names_every_id_with_its_spaces() -> None:
+    """The README's environment table: one row per id, its action space, and its observation with the real keys."""
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    table = readme[readme.index("## Environments") : readme.index("## Training")]
+
+    def describe(space: gym.spaces.Box) -> str:
+        return f"{'x'.join(map(str, space.shape))} {space.dtype}"
+
+    for env_id in ALL_IDS:
+        rows = [line for line in table.splitlines() if line.startswith(f"| `{env_id}` |")]
+        assert len(rows) == 1, f"{env_id}: {len(rows)} rows in the README's environment table"
+        actions, observation = (cell.strip() for cell in rows[0].split("|")[3:5])
+        core = make_core(env_id)
+        action_space = core.single_action_space
+        if isinstance(action_space, gym.spaces.Discrete):
+            assert actions == f"Discrete({action_space.n})", (env_id, actions)
+        else:
+            assert actions == f"MultiDiscrete({action_space.nvec.tolist()})".replace(" ", ""), (env_id, actions)
+        space = core.single_observation_space
+        if isinstance(space, gym.spaces.Dict):
+            for key, sub in space.spaces.items():
+                assert f"`{key}`: {describe(sub)}" in observation, (env_id, key, observation)
+        else:
+            assert observation == describe(space), (env_id, observation)
