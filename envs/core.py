@@ -19,7 +19,8 @@ What a family implements (``idx`` is ``slice(None)`` for all slots or an int arr
 * ``_step(idx, actions) -> (rewards, terminated)``: advance the slots ``idx`` and draw their frames;
 * ``_observation(idx)``: the observation arrays of the slots (views are fine, the faces copy);
 * ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here), or
-  ``_final_infos(slots)`` for several finished slots at once (by default a loop over ``_final_info``);
+  ``_final_infos(slots)`` for several finished slots at once (by default a loop over ``_final_info``); keys that the
+  reference does not report are listed in ``added_info_keys``;
 * optionally ``_step_info(k)`` (endless envs: ``ground_truth``), ``_debug_frame(k)`` and ``render_fps(k)``.
 
 Every face goes through :meth:`BatchedCore.step`, which refuses what a family must never see, before it changes any
@@ -63,6 +64,9 @@ class BatchedCore:
     single_observation_space: gym.Space
     single_action_space: gym.Space
     has_ground_truth_info: ClassVar[bool] = False
+    # Final-info keys that memory-gym 1.0.2 does not report (added for the evaluation): tools comparing infos with the
+    # reference (the parity replays) drop them.
+    added_info_keys: ClassVar[frozenset[str]] = frozenset()
     ground_truth_space: gym.Space | None = None
     base_render_fps: ClassVar[int] = 25
 

@@ -69,12 +69,14 @@ def replay(env_id: str, root: Path = TRACE_ROOT, max_mismatches: int = 5) -> Par
     for episode in trace["episodes"]:
         if env is None or episode.get("fresh_env"):
             env = gym.make(env_id, disable_env_checker=True)
+            added = env.unwrapped.core.added_info_keys  # keys the reference does not report
         result.episodes += 1
         obs, info = env.reset(seed=episode["seed"], options=episode["options"])
         frames = [(obs_digest(obs), None, None, None, jsonable(info))]
         expected = [(episode["reset_obs"], None, None, None, episode["reset_info"])]
         for t, action in enumerate(episode["actions"]):
             obs, reward, terminated, truncated, info = env.step(action)
+            info = {key: value for key, value in info.items() if key not in added}
             frames.append((obs_digest(obs), reward, terminated, truncated, jsonable(info)))
             expected.append(
                 (
@@ -157,6 +159,7 @@ def replay_batched(env_id: str, root: Path = TRACE_ROOT, max_mismatches: int = 5
             ep = episodes[k]
             info = core.step_info(k)
             info.update(finals.get(k, {}))
+            info = {key: value for key, value in info.items() if key not in core.added_info_keys}
             got = (obs_digest(frames[i]), float(rewards[i]), bool(terminated[i]), jsonable(info))
             want = (ep["obs"][t], ep["rewards"][t], ep["terminated"][t], ep["infos"][t])
             check(ep["name"], t + 1, got, want)

@@ -47,6 +47,10 @@ class MortarMayhemCore(BatchedCore):
     down, and every step of the lethal phase that is not the release checks the agent's tile.
     """
 
+    # checks_passed: the checks the agent actually passed (``commands_completed`` keeps the reference's quirks);
+    # command_count: the commands of the episode (finite variants)
+    added_info_keys = frozenset({"checks_passed", "command_count"})
+
     def __init__(
         self,
         num_envs: int = 1,
@@ -454,15 +458,25 @@ class MortarMayhemCore(BatchedCore):
 
     def _final_infos(self, slots: list[int]) -> list[dict[str, Any]]:
         counts = self.num_commands[slots].tolist()
+        passed = self.completed_total[slots].tolist()  # checks passed (the reference's keys keep its quirks)
         if self.endless:
             return [
-                {"commands_completed": completed, "max_command_sequence": count - 1 if count > 1 else 0}
-                for completed, count in zip(self.completed_total[slots].tolist(), counts, strict=True)
+                {
+                    "commands_completed": completed,
+                    "max_command_sequence": count - 1 if count > 1 else 0,
+                    "checks_passed": completed,
+                }
+                for completed, count in zip(passed, counts, strict=True)
             ]
         return [
-            {"success": success, "commands_completed": (current - 1 + success) / count}
-            for success, current, count in zip(
-                self.success[slots].tolist(), self.current[slots].tolist(), counts, strict=True
+            {
+                "success": success,
+                "commands_completed": (current - 1 + success) / count,
+                "checks_passed": checks,
+                "command_count": count,
+            }
+            for success, current, count, checks in zip(
+                self.success[slots].tolist(), self.current[slots].tolist(), counts, passed, strict=True
             )
         ]
 

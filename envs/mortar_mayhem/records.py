@@ -21,7 +21,7 @@ SLOT_FIELDS = (
     ("current", 1, "checks so far in this round"),
     ("timer", 1, "steps to the next check (safe tiles) or release (lethal tiles)"),
     ("success", 1, "the last check is over"),
-    ("completed_total", 1, "passed checks over all rounds (endless)"),
+    ("completed_total", 1, "checks passed in the episode (over all rounds, endless)"),
     ("t", 1, "steps so far (endless)"),
     ("clue_pos", 1, "frame of the clue stream on screen"),
     ("clue_left", 1, "clue frames still to come"),
