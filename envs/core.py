@@ -196,6 +196,11 @@ class BatchedCore:
         """The info that every step and reset of slot ``k`` carries (empty except for the endless envs)."""
         return self._step_info(k)
 
+    def step_infos(self) -> dict[str, np.ndarray]:
+        """The step infos of all slots as arrays with a leading slot axis: row k of ``step_infos()[key]`` equals
+        ``step_info(k)[key]`` (same values, same dtype as gymnasium batches them). Every slot has the same keys."""
+        return self._step_infos()
+
     def debug_frame(self, k: int) -> np.ndarray:
         """The 336x336 ground-truth picture of slot ``k``."""
         frame = self._debug_frame(k)
@@ -240,6 +245,13 @@ class BatchedCore:
     def _step_info(self, k: int) -> dict[str, Any]:
         return {}
 
+    def _step_infos(self) -> dict[str, np.ndarray]:
+        # Families with a step info override this with array operations; this default stacks the per-slot infos.
+        if type(self)._step_info is BatchedCore._step_info:
+            return {}
+        infos = [self._step_info(k) for k in range(self.num_envs)]
+        return {key: np.array([info[key] for info in infos]) for key in infos[0]}
+
     def _debug_frame(self, k: int) -> np.ndarray:
         return self.agent_frame(k)
 
@@ -260,6 +272,12 @@ def _as_array(actions: Any, space: gym.Space) -> np.ndarray:
         return np.asarray(actions)
     except ValueError as err:  # ragged nested sequences
         raise ValueError(f"actions {actions!r} do not form an array of actions in {space}") from err
+
+
+def _plain_column(values: list[Any]) -> bool:
+    """Whether gymnasium batches ``values`` (one per finished slot) into a plain array of the first value's type."""
+    kind = type(values[0])
+    return kind in (int, float, bool) and all(type(value) is kind for value in values)
 
 
 def _describe_space(space: gym.Space) -> str:
@@ -452,8 +470,8 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         self.core.reset_slots(slots, [seeds[k] for k in slots], options)
         self._needs_reset[mask] = False
         infos: dict[str, Any] = {}
-        for k in np.flatnonzero(mask):
-            infos = self._add_info(infos, self.core.step_info(int(k)), int(k))
+        if slots.size:
+            self._add_step_infos(infos, mask)
         return self.core.observations(), infos
 
     def _slot_seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
@@ -469,37 +487,83 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
         actions = _as_array(actions, self.action_space)
         n = self.num_envs
-        rewards = np.zeros(n, dtype=np.float64)
-        terminated = np.zeros(n, dtype=bool)
-        infos: dict[str, Any] = {}
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
             actions = self.core.check_actions(actions)  # all of them, also those of the restarting slots (ignored)
             restart = np.flatnonzero(self._needs_reset)
             live = np.flatnonzero(~self._needs_reset)
+            rewards = np.zeros(n, dtype=np.float64)
+            terminated = np.zeros(n, dtype=bool)
             if live.size:
                 r, t, finals = self.core.step(actions[live], idx=live)
                 rewards[live], terminated[live] = r, t
             else:
                 finals = {}
-            self.core.reset_slots(restart)
+            self.core.reset_slots(restart)  # one call for all of them (their generators continue)
         else:
             rewards, terminated, finals = self.core.step(actions)
             rewards = np.asarray(rewards, dtype=np.float64)
-        same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
-        final_obs = self.core.observations() if same_step and terminated.any() else None
-        for k in range(n):
-            info = self.core.step_info(k)
-            info.update(finals.get(k, {}))
-            if final_obs is not None and terminated[k]:
-                obs_k = {key: v[k] for key, v in final_obs.items()} if isinstance(final_obs, dict) else final_obs[k]
-                infos = self._add_info(infos, {"final_obs": obs_k, "final_info": info}, k)
-                self.core.reset_slot(k)
-                info = self.core.step_info(k)
-            if info:
-                infos = self._add_info(infos, info, k)
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            self._same_step_autoreset(infos, finals)
+        else:
+            self._add_step_infos(infos)
+            self._add_final_infos(infos, finals)
         self._needs_reset = terminated.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
         truncated = np.zeros(n, dtype=bool)
         return self.core.observations(), rewards, terminated, truncated, infos
+
+    # Infos are assembled with arrays: gymnasium's format (``info[key]`` batched over the slots, ``info["_key"]`` the
+    # mask of the slots that have the key), the values and key order of ``_add_info`` applied slot by slot to each
+    # slot's ``step_info`` merged with its final info (NEXT_STEP), or preceded by ``final_obs`` and ``final_info``
+    # (SAME_STEP).
+    def _add_step_infos(self, infos: dict[str, Any], mask: np.ndarray | None = None) -> None:
+        """The step infos of all slots (of the ``mask`` slots; the others' rows are zero and unmasked)."""
+        for key, values in self.core.step_infos().items():
+            if mask is None:
+                infos[key], infos[f"_{key}"] = values, np.ones(self.num_envs, dtype=bool)
+            else:
+                values[~mask] = 0
+                infos[key], infos[f"_{key}"] = values, mask.copy()
+
+    def _add_final_infos(self, infos: dict[str, Any], finals: dict[int, dict[str, Any]]) -> None:
+        """The final infos of the finished slots: one array per key when every slot reports the same keys with
+        values of one plain type per key (every family here), else slot by slot through gymnasium's ``_add_info``."""
+        if not finals:
+            return
+        slots = list(finals)
+        rows = list(finals.values())
+        keys = tuple(rows[0])
+        columns = [[row[key] for row in rows] for key in keys] if all(tuple(row) == keys for row in rows) else None
+        if columns is None or not all(_plain_column(column) for column in columns):
+            for k, row in finals.items():
+                self._add_info(infos, row, k)
+            return
+        mask = np.zeros(self.num_envs, dtype=bool)
+        mask[slots] = True
+        for key, column in zip(keys, columns, strict=True):
+            values = np.zeros(self.num_envs, dtype=type(column[0]))
+            values[slots] = column
+            infos[key], infos[f"_{key}"] = values, mask.copy()
+
+    def _same_step_autoreset(self, infos: dict[str, Any], finals: dict[int, dict[str, Any]]) -> None:
+        """SAME_STEP: the finished slots report ``final_obs`` and ``final_info`` (their step info merged with their
+        final info) and are reset at once; then every slot reports the step info of its current episode."""
+        done = list(finals)
+        entries = {}
+        if done:
+            before = self.core.step_infos()
+            obs = self.core.observations(np.array(done))
+            for i, k in enumerate(done):
+                final_obs = {key: v[i] for key, v in obs.items()} if isinstance(obs, dict) else obs[i]
+                final_info = {key: values[k] for key, values in before.items()}
+                final_info.update(finals[k])
+                entries[k] = {"final_obs": final_obs, "final_info": final_info}
+            self.core.reset_slots(done)
+        if done and done[0] == 0:  # slot 0's entries come first, as slot by slot
+            self._add_info(infos, entries.pop(0), 0)
+        self._add_step_infos(infos)
+        for k, entry in entries.items():
+            self._add_info(infos, entry, k)
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         if self.render_mode == "rgb_array":

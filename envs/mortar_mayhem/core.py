@@ -485,6 +485,11 @@ class MortarMayhemCore(BatchedCore):
             return {"ground_truth": self.target[k] / 5.0}
         return {}
 
+    def _step_infos(self) -> dict[str, np.ndarray]:
+        if self.endless:
+            return {"ground_truth": self.target / 5.0}
+        return {}
+
     def render_fps(self, k: int) -> int:
         return CLUE_FPS if self.clue_left[k] > 0 else self.base_render_fps
 

@@ -709,6 +709,11 @@ class MysteryPathCore(BatchedCore):
             return {"ground_truth": DIRECTIONS[self.ground_truth[k]].copy()}
         return {}
 
+    def _step_infos(self) -> dict[str, np.ndarray]:
+        if self.endless:
+            return {"ground_truth": DIRECTIONS[self.ground_truth]}
+        return {}
+
     def _debug_frame(self, k: int) -> np.ndarray:
         """Ground truth: the whole level (path white, origin blue, goal green, walls red) or, in the endless
         variant, every generated path tile at alpha 200 and the stamina bar; plus the agent and the cross."""

@@ -892,6 +892,12 @@ class SearingSpotlightsCore(BatchedCore):
         position = [self.pos.item(k, 0), self.pos.item(k, 1), self.coin_x.item(k, 0), self.coin_y.item(k, 0)]
         return {"ground_truth": np.divide(position, float(SCREEN))}  # float64, as in the reference
 
+    def _step_infos(self) -> dict[str, np.ndarray]:
+        if not self.endless:
+            return {}
+        position = np.concatenate([self.pos, self.coin_x[:, :1], self.coin_y[:, :1]], axis=1)
+        return {"ground_truth": np.divide(position, float(SCREEN))}
+
     def _debug_frame(self, k: int) -> np.ndarray:
         """Floor, the darkness with the last step's holes, then exit, coins, agent and HUD above it."""
         floor = floor_rows(int(self.floor_kind[k]), bool(self.hit[k] and self.red_feedback[k]))

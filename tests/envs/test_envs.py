@@ -387,3 +387,106 @@ def test_readme_table_names_every_id_with_its_spaces() -> None:
                 assert f"`{key}`: {describe(sub)}" in observation, (env_id, key, observation)
         else:
             assert observation == describe(space), (env_id, observation)
+
+
+class SlotBySlotVectorEnv(envs.MemoryGymVectorEnv):
+    """The vector face as it assembled infos before: every slot's ``step_info`` merged with its final info, through
+    gymnasium's ``_add_info``, one slot after the other (the format the array assembly must reproduce)."""
+
+    def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+        options = dict(options or {})
+        mask = np.asarray(options.pop("reset_mask", np.ones(self.num_envs, dtype=bool)), dtype=bool)
+        obs, _ = super().reset(seed=seed, options={**options, "reset_mask": mask})
+        infos: dict[str, Any] = {}
+        for k in np.flatnonzero(mask).tolist():
+            infos = self._add_info(infos, self.core.step_info(k), k)
+        return obs, infos
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
+        n = self.num_envs
+        rewards = np.zeros(n, dtype=np.float64)
+        terminated = np.zeros(n, dtype=bool)
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
+            restart, live = np.flatnonzero(self._needs_reset), np.flatnonzero(~self._needs_reset)
+            finals = {}
+            if live.size:
+                r, t, finals = self.core.step(actions[live], idx=live)
+                rewards[live], terminated[live] = r, t
+            self.core.reset_slots(restart)
+        else:
+            rewards, terminated, finals = self.core.step(actions)
+        final_obs = self.core.observations() if self.autoreset_mode == AutoresetMode.SAME_STEP else None
+        for k in range(n):
+            info = self.core.step_info(k)
+            info.update(finals.get(k, {}))
+            if final_obs is not None and terminated[k]:
+                obs_k = {key: v[k] for key, v in final_obs.items()} if isinstance(final_obs, dict) else final_obs[k]
+                infos = self._add_info(infos, {"final_obs": obs_k, "final_info": info}, k)
+                self.core.reset_slot(k)
+                info = self.core.step_info(k)
+            if info:
+                infos = self._add_info(infos, info, k)
+        self._needs_reset = terminated.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
+        return self.core.observations(), rewards, terminated, np.zeros(n, dtype=bool), infos
+
+
+def assert_same_infos(got: dict[str, Any], want: dict[str, Any], where: str) -> None:
+    """Same keys in the same order, same dtypes and shapes, same values (object arrays element by element)."""
+    assert list(got) == list(want), f"{where}: keys {list(got)} != {list(want)}"
+    for key, w in want.items():
+        g = got[key]
+        if isinstance(w, dict):
+            assert_same_infos(g, w, f"{where}/{key}")
+        elif w.dtype == object:
+            assert g.dtype == object and g.shape == w.shape, f"{where}/{key}"
+            for i, (a, b) in enumerate(zip(g, w, strict=True)):
+                assert same(image_of(a) if a is not None else a, image_of(b) if b is not None else b), (
+                    f"{where}/{key}[{i}]"
+                )
+        else:
+            assert (g.dtype, g.shape) == (w.dtype, w.shape), f"{where}/{key}: {g.dtype}{g.shape} != {w.dtype}{w.shape}"
+            np.testing.assert_array_equal(g, w, err_msg=f"{where}/{key}")
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_vector_infos_assembled_with_arrays_match_slot_by_slot_assembly(env_id: str, mode: AutoresetMode) -> None:
+    core_path, variant = ENV_IDS[env_id]
+    fast = gym.make_vec(env_id, num_envs=5, autoreset_mode=mode)
+    slow = SlotBySlotVectorEnv(core_path, num_envs=5, autoreset_mode=mode, **variant)
+    mask = np.array([True, False, True, True, False])
+    for seed, options in ((3, {}), (4, {"reset_mask": mask})):
+        got, want = fast.reset(seed=seed, options=options), slow.reset(seed=seed, options=options)
+        np.testing.assert_array_equal(image_of(got[0]), image_of(want[0]))
+        assert_same_infos(got[1], want[1], f"reset {seed}")
+    rng = np.random.default_rng(0)
+    finished = 0
+    for t in range(MAX_VECTOR_STEPS):
+        if finished >= 6:
+            break
+        actions = np.stack([np.asarray(random_action(fast.single_action_space, rng)) for _ in range(5)])
+        got, want = fast.step(actions), slow.step(actions)
+        np.testing.assert_array_equal(image_of(got[0]), image_of(want[0]))
+        assert got[1].tolist() == want[1].tolist() and got[2].tolist() == want[2].tolist()
+        assert_same_infos(got[4], want[4], f"step {t}")
+        finished += int(got[2].sum())
+    assert finished, "no episode ended: the final infos were not compared"
+
+
+@pytest.mark.parametrize("env_id", [env_id for env_id in ALL_IDS if make_core(env_id).has_ground_truth_info])
+def test_vector_face_assembles_step_infos_without_a_per_slot_call(env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The endless ids' ground truth comes as one array per step (``step_infos``), not slot by slot."""
+    venv = gym.make_vec(env_id, num_envs=4)
+    venv.reset(seed=0)
+
+    def per_slot(k: int) -> dict:
+        raise AssertionError("the vector face asked for one slot's step info")
+
+    monkeypatch.setattr(venv.core, "step_info", per_slot)
+    rng = np.random.default_rng(1)
+    for _ in range(60):
+        actions = np.stack([np.asarray(random_action(venv.single_action_space, rng)) for _ in range(4)])
+        _, _, _, _, infos = venv.step(actions)
+        assert infos["ground_truth"].shape[0] == 4 and infos["_ground_truth"].all()
+    venv.reset(seed=1)
