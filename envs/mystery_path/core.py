@@ -249,8 +249,12 @@ class MysteryPathCore(BatchedCore):
         # minus the camera offset.
         self.agent_screen_left[at] = int(radius - self.half[slots[0]] - camera_offset)
         for k, rng in zip(slots, rngs, strict=True):
-            if self.segment_rng[k] is rng:  # the generator continues: first make the last episode's remaining draws
-                self._catch_up(k)
+            # One block of draws for the level (a few dozen words), and before it, if the generator continues, the
+            # draws of the segments that the reference built in the last episode and this slot did not.
+            draws = BoundedDraws(rng)
+            draws.read_ahead()
+            if self.segment_rng[k] is rng:
+                self._skip_segments(k, draws)
             self.segment_rng[k] = rng
             self.reference_segments[k] = INITIAL_SEGMENTS
             self.chain_lists[k] = ([], [])
@@ -258,7 +262,8 @@ class MysteryPathCore(BatchedCore):
             self.num_segments[k] = 0
             self.walks_until[k] = 0
             self.tile_node[k] = -1
-            self._add_segment(k, rng)
+            self._add_segment(k, draws)
+            draws.close()
             self._enter_segment(k, 0)
             self.flags[k, 0] = REFILL  # the very first tile pays nothing
             self.ground_truth[k] = self.direction[k, 0]  # never west: the first tile is in column 0
@@ -283,15 +288,13 @@ class MysteryPathCore(BatchedCore):
         else:
             self.canvas.view[k] = frame
 
-    def _add_segment(self, k: int, rng: np.random.Generator) -> None:
-        """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile."""
+    def _add_segment(self, k: int, draws: BoundedDraws) -> None:
+        """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile, drawn from
+        ``draws`` (which the caller closes)."""
         segment = int(self.num_segments[k])
-        draws = BoundedDraws(rng)
-        draws.read_ahead()  # the level needs a few dozen words: fetch them before the first draw
         start_y = draws.below(GRID) if segment == 0 else int(self.last_goal_y[k])
         goal_y = draws.below(GRID)
         path, _ = draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
-        draws.close()
         shift = segment * SEGMENT_COLUMNS
         xs, ys = self.chain_lists[k]
         begin = len(xs)
@@ -322,7 +325,7 @@ class MysteryPathCore(BatchedCore):
         the first is built at reset; entering the second builds every segment that the reference has built by then,
         in the same order from the same generator, so levels and random streams are the same. An episode that never
         leaves the first segment (most short ones) then costs one level instead of three, unless the next reset
-        continues the generator: then :meth:`_catch_up` makes the missing draws first.
+        continues the generator: then :meth:`_skip_segments` makes the missing draws first.
         """
         while segment > self.reference_segments[k] - 2:
             self.reference_segments[k] += 1
@@ -340,8 +343,21 @@ class MysteryPathCore(BatchedCore):
 
     def _catch_up(self, k: int) -> None:
         """Build the segments that the reference has built by now but this slot has not yet (see _enter_segment)."""
-        while self.num_segments[k] < self.reference_segments[k]:
-            self._add_segment(k, self.segment_rng[k])
+        if self.num_segments[k] < self.reference_segments[k]:
+            draws = BoundedDraws(self.segment_rng[k])
+            draws.read_ahead()
+            while self.num_segments[k] < self.reference_segments[k]:
+                self._add_segment(k, draws)
+            draws.close()
+
+    def _skip_segments(self, k: int, draws: BoundedDraws) -> None:
+        """Make the draws of the segments that the reference has built by now but this slot has not, without
+        building them: at a reset that continues the generator, the finished episode's segments are never seen."""
+        goal_y = int(self.last_goal_y[k])
+        for segment in range(int(self.num_segments[k]), int(self.reference_segments[k])):
+            start_y = draws.below(GRID) if segment == 0 else goal_y
+            goal_y = draws.below(GRID)
+            draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
 
     def path_tiles(self, k: int) -> tuple[list[int], list[int]]:
         """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""

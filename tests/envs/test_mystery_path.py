@@ -502,3 +502,22 @@ def test_endless_segments_are_built_lazily_with_the_reference_stream() -> None:
     after_four = _reference_segments(rng, 3)
     env.reset()  # generator continued: the draws of all four segments come first
     assert list(zip(*core.path_tiles(0), strict=True)) == [t for seg in after_four for t in seg]
+
+
+def test_a_reset_that_continues_the_generator_draws_but_does_not_build_the_last_episodes_segments(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The finished episode's remaining segments (the reference built them) only advance the generator: their
+    draws are made, their tiles never built; the new episode's level is still the reference's."""
+    rng = envs.core.seeded_generator(33)
+    _reference_segments(rng, 3)
+    second = _reference_segments(rng, 3)
+    env = make("Endless-MysteryPath-v0")
+    env.reset(seed=33)
+    core = core_of(env)
+    built = []
+    original = type(core)._add_segment
+    monkeypatch.setattr(type(core), "_add_segment", lambda self, k, draws: built.append(k) or original(self, k, draws))
+    env.reset()  # generator continued: the draws of two unbuilt segments come first
+    assert built == [0] and core.num_segments[0] == 1
+    assert list(zip(*core.path_tiles(0), strict=True)) == [t for seg in second for t in seg]
