@@ -52,6 +52,7 @@ __all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_c
 Index = slice | np.ndarray
 _SEED_TYPES = (int, np.integer)
 _UNSIGNED = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}  # integer itemsize -> unsigned of that size
+_FEW_ACTIONS = 8  # up to this many entries, actions are checked as Python ints (cheaper than numpy calls)
 RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
 DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
 
@@ -82,7 +83,7 @@ class BatchedCore:
         self.episode_return = np.zeros(self.num_envs, dtype=np.float64)
         self.episode_length = np.zeros(self.num_envs, dtype=np.int64)
         self.unready: set[int] = set(range(self.num_envs))  # slots without an episode: never reset, or reset failed
-        self._action_bounds: tuple[tuple[int, ...], np.ndarray] | None = None  # see ``check_actions``
+        self._action_bounds: tuple | None = None  # see ``check_actions``
 
     # ----------------------------------------------------------------------------------------------- slot API
     def resolve(self, options: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -160,19 +161,25 @@ class BatchedCore:
         """``actions`` as an array, if it holds one valid action per slot of ``idx``; else ``ValueError``.
 
         One vectorised test: the shape, an integer dtype, and every entry below its bound once viewed as unsigned
-        (negative entries become huge). The message of a refusal names the slot, the action and the valid space.
+        (negative entries become huge); a few entries (one slot) are compared as Python ints, which is cheaper. The
+        message of a refusal names the slot, the action and the valid space.
         """
         if not isinstance(actions, np.ndarray):
             actions = _as_array(actions, self.single_action_space)
         bounds = self._action_bounds
         if bounds is None:
-            bounds = self._action_bounds = _action_bounds(self.single_action_space)
-        row_shape, high = bounds
-        if (
-            actions.shape != (self.num_envs if isinstance(idx, slice) else len(idx), *row_shape)
-            or actions.dtype.kind not in "iu"
-            or np.count_nonzero(actions.view(_UNSIGNED[actions.itemsize]) >= high)
+            bounds = self._action_bounds = _action_bounds(self.single_action_space, self.num_envs)
+        batch_shape, row_shape, high, top = bounds
+        if actions.shape != (batch_shape if isinstance(idx, slice) else (len(idx), *row_shape)) or (
+            actions.dtype.kind not in "iu"
         ):
+            raise ValueError(_action_error(actions, self.slots(idx), self.single_action_space))
+        if actions.size > _FEW_ACTIONS or top is None:
+            valid = not np.count_nonzero(actions.view(_UNSIGNED[actions.itemsize]) >= high)
+        else:
+            values = actions.ravel().tolist()
+            valid = min(values) >= 0 and max(values) < top
+        if not valid:
             raise ValueError(_action_error(actions, self.slots(idx), self.single_action_space))
         return actions
 
@@ -256,14 +263,16 @@ class BatchedCore:
         return self.agent_frame(k)
 
 
-def _action_bounds(space: gym.Space) -> tuple[tuple[int, ...], np.ndarray]:
-    """The shape of one action and the (exclusive) upper bound of each of its entries, for :meth:`check_actions`."""
+def _action_bounds(space: gym.Space, num_envs: int) -> tuple[tuple[int, ...], tuple[int, ...], np.ndarray, int | None]:
+    """For :meth:`BatchedCore.check_actions`: the shape of all slots' actions and of one, the (exclusive) upper
+    bound of each entry, and that bound as an int when it is the same for all entries (else None)."""
     if isinstance(space, gym.spaces.Discrete) and space.start == 0:
-        return (), np.array(space.n, dtype=np.uint64)
+        return (num_envs,), (), np.array(space.n, dtype=np.uint64), int(space.n)
     if isinstance(space, gym.spaces.MultiDiscrete) and not np.any(space.start):
         nvec = np.asarray(space.nvec, dtype=np.uint64)
-        uniform = np.all(nvec == nvec.flat[0])  # one bound for all entries: a comparison 4x cheaper than broadcast
-        return space.shape, np.array(nvec.flat[0]) if uniform else nvec
+        if np.all(nvec == nvec.flat[0]):  # one bound for all entries: a comparison 4x cheaper than broadcast
+            return (num_envs, *space.shape), space.shape, np.array(nvec.flat[0]), int(nvec.flat[0])
+        return (num_envs, *space.shape), space.shape, nvec, None
     raise NotImplementedError(f"action checks cover Discrete and MultiDiscrete spaces starting at 0, not {space}")
 
 
