@@ -19,8 +19,16 @@ What a family implements (``idx`` is ``slice(None)`` for all slots or an int arr
 * ``_step(idx, actions) -> (rewards, terminated)``: advance the slots ``idx`` and draw their frames;
 * ``_observation(idx)``: the observation arrays of the slots (views are fine, the faces copy);
 * ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here), or
-  ``_final_infos(slots)`` for several finished slots at once (by default a loop over ``_final_info``);
+  ``_final_infos(slots)`` for several finished slots at once (by default a loop over ``_final_info``); keys that the
+  reference does not report are listed in ``added_info_keys``;
 * optionally ``_step_info(k)`` (endless envs: ``ground_truth``), ``_debug_frame(k)`` and ``render_fps(k)``.
+
+Every face goes through :meth:`BatchedCore.step`, which refuses what a family must never see, before it changes any
+state: a step of a slot that has no episode (never reset, or its last reset failed) raises
+``gymnasium.error.ResetNeeded``, and actions outside the action space raise ``ValueError`` naming the slot, the action
+and the space. Actions are integer arrays, one row per stepped slot (``(n,)`` for ``Discrete``, ``(n, branches)``
+for ``MultiDiscrete``); floats are refused, integer-valued ones too (a float action is almost always a bug, such as
+passing probabilities; gymnasium's ``Discrete.contains`` refuses floats as well): cast with ``astype(int)``.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
@@ -42,6 +51,8 @@ __all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_c
 
 Index = slice | np.ndarray
 _SEED_TYPES = (int, np.integer)
+_UNSIGNED = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}  # integer itemsize -> unsigned of that size
+_FEW_ACTIONS = 8  # up to this many entries, actions are checked as Python ints (cheaper than numpy calls)
 RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
 DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
 
@@ -54,6 +65,9 @@ class BatchedCore:
     single_observation_space: gym.Space
     single_action_space: gym.Space
     has_ground_truth_info: ClassVar[bool] = False
+    # Final-info keys that memory-gym 1.0.2 does not report (added for the evaluation): tools comparing infos with the
+    # reference (the parity replays) drop them.
+    added_info_keys: ClassVar[frozenset[str]] = frozenset()
     ground_truth_space: gym.Space | None = None
     base_render_fps: ClassVar[int] = 25
 
@@ -68,6 +82,8 @@ class BatchedCore:
         self.slot_options: list[dict[str, Any]] = [dict(self.base_options) for _ in range(self.num_envs)]
         self.episode_return = np.zeros(self.num_envs, dtype=np.float64)
         self.episode_length = np.zeros(self.num_envs, dtype=np.int64)
+        self.unready: set[int] = set(range(self.num_envs))  # slots without an episode: never reset, or reset failed
+        self._action_bounds: tuple | None = None  # see ``check_actions``
 
     # ----------------------------------------------------------------------------------------------- slot API
     def resolve(self, options: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -88,11 +104,12 @@ class BatchedCore:
         ``None``) per slot. The result equals :meth:`reset_slot` on each slot in turn, but a family may build the
         levels together (its ``_reset_slots`` hook), which saves the per-slot overhead when many episodes end at once.
         """
-        opts = self.resolve(options)  # validate before touching any state
         if isinstance(slots, np.ndarray):
             slots = slots.astype(np.int64, copy=False).tolist()
         else:
             slots = [int(k) for k in slots]
+        self.unready.update(slots)  # until the new episodes are built: a failed reset leaves no episode to step
+        opts = self.resolve(options)  # validate before touching any other state
         seeds = [None] * len(slots) if seeds is None else list(seeds)
         if len(seeds) != len(slots):
             raise ValueError(f"got {len(seeds)} seeds for {len(slots)} slots")
@@ -113,6 +130,7 @@ class BatchedCore:
             self.episode_return[slots] = 0.0
             self.episode_length[slots] = 0
             self._reset_slots(slots, rngs, opts)
+            self.unready.difference_update(slots)
 
     def step(
         self, actions: np.ndarray, idx: np.ndarray | None = None
@@ -120,10 +138,14 @@ class BatchedCore:
         """Advance slots ``idx`` (all when ``None``) by one step with ``actions`` (one row per stepped slot).
 
         Returns the rewards and terminated flags of the stepped slots and the final infos of the slots whose episode
-        ended, keyed by slot index.
+        ended, keyed by slot index. Raises ``ResetNeeded`` for a slot without an episode and ``ValueError`` for
+        actions outside the action space (see :meth:`check_actions`), before any state changes.
         """
         sel: Index = slice(None) if idx is None else np.asarray(idx, dtype=np.int64)
-        rewards, terminated = self._step(sel, np.asarray(actions))
+        if self.unready:
+            self._check_ready(sel)
+        actions = self.check_actions(actions, sel)
+        rewards, terminated = self._step(sel, actions)
         self.episode_return[sel] += rewards
         self.episode_length[sel] += 1
         finals: dict[int, dict] = {}
@@ -135,6 +157,41 @@ class BatchedCore:
                 finals[k] = {"reward": reward, "length": length, **info}
         return rewards, terminated, finals
 
+    def check_actions(self, actions: Any, idx: Index = slice(None)) -> np.ndarray:
+        """``actions`` as an array, if it holds one valid action per slot of ``idx``; else ``ValueError``.
+
+        One vectorised test: the shape, an integer dtype, and every entry below its bound once viewed as unsigned
+        (negative entries become huge); a few entries (one slot) are compared as Python ints, which is cheaper. The
+        message of a refusal names the slot, the action and the valid space.
+        """
+        if not isinstance(actions, np.ndarray):
+            actions = _as_array(actions, self.single_action_space)
+        bounds = self._action_bounds
+        if bounds is None:
+            bounds = self._action_bounds = _action_bounds(self.single_action_space, self.num_envs)
+        batch_shape, row_shape, high, top = bounds
+        if actions.shape != (batch_shape if isinstance(idx, slice) else (len(idx), *row_shape)) or (
+            actions.dtype.kind not in "iu"
+        ):
+            raise ValueError(_action_error(actions, self.slots(idx), self.single_action_space))
+        if actions.size > _FEW_ACTIONS or top is None:
+            valid = not np.count_nonzero(actions.view(_UNSIGNED[actions.itemsize]) >= high)
+        else:
+            values = actions.ravel().tolist()
+            valid = min(values) >= 0 and max(values) < top
+        if not valid:
+            raise ValueError(_action_error(actions, self.slots(idx), self.single_action_space))
+        return actions
+
+    def _check_ready(self, sel: Index) -> None:
+        waiting = sorted(self.unready.intersection(self.slots(sel).tolist()))
+        if waiting:
+            which = f"slot {waiting[0]}" if len(waiting) == 1 else f"slots {', '.join(map(str, waiting[:8]))}"
+            raise ResetNeeded(
+                f"{which} of {self.env_name or type(self).__name__} has no episode to step (never reset, or the last "
+                "reset failed): call reset first"
+            )
+
     def observations(self, idx: np.ndarray | None = None) -> np.ndarray | dict[str, np.ndarray]:
         """Copies of the current observations of the slots ``idx`` (all when ``None``)."""
         obs = self._observation(slice(None) if idx is None else np.asarray(idx, dtype=np.int64))
@@ -145,6 +202,11 @@ class BatchedCore:
     def step_info(self, k: int) -> dict[str, Any]:
         """The info that every step and reset of slot ``k`` carries (empty except for the endless envs)."""
         return self._step_info(k)
+
+    def step_infos(self) -> dict[str, np.ndarray]:
+        """The step infos of all slots as arrays with a leading slot axis: row k of ``step_infos()[key]`` equals
+        ``step_info(k)[key]`` (same values, same dtype as gymnasium batches them). Every slot has the same keys."""
+        return self._step_infos()
 
     def debug_frame(self, k: int) -> np.ndarray:
         """The 336x336 ground-truth picture of slot ``k``."""
@@ -190,8 +252,71 @@ class BatchedCore:
     def _step_info(self, k: int) -> dict[str, Any]:
         return {}
 
+    def _step_infos(self) -> dict[str, np.ndarray]:
+        # Families with a step info override this with array operations; this default stacks the per-slot infos.
+        if type(self)._step_info is BatchedCore._step_info:
+            return {}
+        infos = [self._step_info(k) for k in range(self.num_envs)]
+        return {key: np.array([info[key] for info in infos]) for key in infos[0]}
+
     def _debug_frame(self, k: int) -> np.ndarray:
         return self.agent_frame(k)
+
+
+def _action_bounds(space: gym.Space, num_envs: int) -> tuple[tuple[int, ...], tuple[int, ...], np.ndarray, int | None]:
+    """For :meth:`BatchedCore.check_actions`: the shape of all slots' actions and of one, the (exclusive) upper
+    bound of each entry, and that bound as an int when it is the same for all entries (else None)."""
+    if isinstance(space, gym.spaces.Discrete) and space.start == 0:
+        return (num_envs,), (), np.array(space.n, dtype=np.uint64), int(space.n)
+    if isinstance(space, gym.spaces.MultiDiscrete) and not np.any(space.start):
+        nvec = np.asarray(space.nvec, dtype=np.uint64)
+        if np.all(nvec == nvec.flat[0]):  # one bound for all entries: a comparison 4x cheaper than broadcast
+            return (num_envs, *space.shape), space.shape, np.array(nvec.flat[0]), int(nvec.flat[0])
+        return (num_envs, *space.shape), space.shape, nvec, None
+    raise NotImplementedError(f"action checks cover Discrete and MultiDiscrete spaces starting at 0, not {space}")
+
+
+def _as_array(actions: Any, space: gym.Space) -> np.ndarray:
+    try:
+        return np.asarray(actions)
+    except ValueError as err:  # ragged nested sequences
+        raise ValueError(f"actions {actions!r} do not form an array of actions in {space}") from err
+
+
+def _plain_column(values: list[Any]) -> bool:
+    """Whether gymnasium batches ``values`` (one per finished slot) into a plain array of the first value's type."""
+    kind = type(values[0])
+    return kind in (int, float, bool) and all(type(value) is kind for value in values)
+
+
+def _describe_space(space: gym.Space) -> str:
+    if isinstance(space, gym.spaces.Discrete):
+        return f"{space} (an integer 0..{space.n - 1})"
+    if isinstance(space, gym.spaces.MultiDiscrete):
+        ranges = ", ".join(f"0..{n - 1}" for n in np.asarray(space.nvec).reshape(-1).tolist())
+        return f"MultiDiscrete({np.asarray(space.nvec).tolist()}) (integers [{ranges}])"
+    return str(space)
+
+
+def _action_error(actions: np.ndarray, slots: np.ndarray, space: gym.Space) -> str:
+    """Why ``actions`` (one row per slot of ``slots``) are refused: the first offending slot, its action, the space."""
+    valid = _describe_space(space)
+    row_shape = space.shape
+    if actions.shape[:1] != (len(slots),):
+        return (
+            f"got actions of shape {actions.shape} for {len(slots)} slots: expected one action per slot, an array of "
+            f"shape {(len(slots), *row_shape)}; each action in {valid}"
+        )
+    for k, action in zip(slots.tolist(), actions, strict=True):
+        value = action.tolist()
+        if action.shape != row_shape:
+            return f"slot {k}: action {value!r} has shape {action.shape}, expected {row_shape}: an action in {valid}"
+        if actions.dtype.kind not in "iu":
+            cast = " (integer-valued floats too: cast with astype(int))" if actions.dtype.kind == "f" else ""
+            return f"slot {k}: action {value!r} has dtype {actions.dtype}; actions are integers{cast}, in {valid}"
+        if not space.contains(action.astype(np.int64)):
+            return f"slot {k}: action {value!r} is outside the action space {valid}"
+    return f"actions {actions.tolist()!r} are outside the action space {valid}"
 
 
 def load_core(core: str | type[BatchedCore]) -> type[BatchedCore]:
@@ -272,7 +397,7 @@ class MemoryGymEnv(gym.Env):
         return self._obs(), self.core.step_info(0)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict]:
-        rewards, terminated, finals = self.core.step(np.asarray(action)[None])
+        rewards, terminated, finals = self.core.step(_as_array(action, self.action_space)[None])
         info = self.core.step_info(0)
         info.update(finals.get(0, {}))
         if self.render_mode == "human":
@@ -354,8 +479,8 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         self.core.reset_slots(slots, [seeds[k] for k in slots], options)
         self._needs_reset[mask] = False
         infos: dict[str, Any] = {}
-        for k in np.flatnonzero(mask):
-            infos = self._add_info(infos, self.core.step_info(int(k)), int(k))
+        if slots.size:
+            self._add_step_infos(infos, mask)
         return self.core.observations(), infos
 
     def _slot_seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
@@ -369,38 +494,85 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         return seeds
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
-        actions = np.asarray(actions)
+        actions = _as_array(actions, self.action_space)
         n = self.num_envs
-        rewards = np.zeros(n, dtype=np.float64)
-        terminated = np.zeros(n, dtype=bool)
-        infos: dict[str, Any] = {}
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
+            actions = self.core.check_actions(actions)  # all of them, also those of the restarting slots (ignored)
             restart = np.flatnonzero(self._needs_reset)
             live = np.flatnonzero(~self._needs_reset)
+            rewards = np.zeros(n, dtype=np.float64)
+            terminated = np.zeros(n, dtype=bool)
             if live.size:
                 r, t, finals = self.core.step(actions[live], idx=live)
                 rewards[live], terminated[live] = r, t
             else:
                 finals = {}
-            self.core.reset_slots(restart)
+            self.core.reset_slots(restart)  # one call for all of them (their generators continue)
         else:
             rewards, terminated, finals = self.core.step(actions)
             rewards = np.asarray(rewards, dtype=np.float64)
-        same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
-        final_obs = self.core.observations() if same_step and terminated.any() else None
-        for k in range(n):
-            info = self.core.step_info(k)
-            info.update(finals.get(k, {}))
-            if final_obs is not None and terminated[k]:
-                obs_k = {key: v[k] for key, v in final_obs.items()} if isinstance(final_obs, dict) else final_obs[k]
-                infos = self._add_info(infos, {"final_obs": obs_k, "final_info": info}, k)
-                self.core.reset_slot(k)
-                info = self.core.step_info(k)
-            if info:
-                infos = self._add_info(infos, info, k)
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode == AutoresetMode.SAME_STEP:
+            self._same_step_autoreset(infos, finals)
+        else:
+            self._add_step_infos(infos)
+            self._add_final_infos(infos, finals)
         self._needs_reset = terminated.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
         truncated = np.zeros(n, dtype=bool)
         return self.core.observations(), rewards, terminated, truncated, infos
+
+    # Infos are assembled with arrays: gymnasium's format (``info[key]`` batched over the slots, ``info["_key"]`` the
+    # mask of the slots that have the key), the values and key order of ``_add_info`` applied slot by slot to each
+    # slot's ``step_info`` merged with its final info (NEXT_STEP), or preceded by ``final_obs`` and ``final_info``
+    # (SAME_STEP).
+    def _add_step_infos(self, infos: dict[str, Any], mask: np.ndarray | None = None) -> None:
+        """The step infos of all slots (of the ``mask`` slots; the others' rows are zero and unmasked)."""
+        for key, values in self.core.step_infos().items():
+            if mask is None:
+                infos[key], infos[f"_{key}"] = values, np.ones(self.num_envs, dtype=bool)
+            else:
+                values[~mask] = 0
+                infos[key], infos[f"_{key}"] = values, mask.copy()
+
+    def _add_final_infos(self, infos: dict[str, Any], finals: dict[int, dict[str, Any]]) -> None:
+        """The final infos of the finished slots: one array per key when every slot reports the same keys with
+        values of one plain type per key (every family here), else slot by slot through gymnasium's ``_add_info``."""
+        if not finals:
+            return
+        slots = list(finals)
+        rows = list(finals.values())
+        keys = tuple(rows[0])
+        columns = [[row[key] for row in rows] for key in keys] if all(tuple(row) == keys for row in rows) else None
+        if columns is None or not all(_plain_column(column) for column in columns):
+            for k, row in finals.items():
+                self._add_info(infos, row, k)
+            return
+        mask = np.zeros(self.num_envs, dtype=bool)
+        mask[slots] = True
+        for key, column in zip(keys, columns, strict=True):
+            values = np.zeros(self.num_envs, dtype=type(column[0]))
+            values[slots] = column
+            infos[key], infos[f"_{key}"] = values, mask.copy()
+
+    def _same_step_autoreset(self, infos: dict[str, Any], finals: dict[int, dict[str, Any]]) -> None:
+        """SAME_STEP: the finished slots report ``final_obs`` and ``final_info`` (their step info merged with their
+        final info) and are reset at once; then every slot reports the step info of its current episode."""
+        done = list(finals)
+        entries = {}
+        if done:
+            before = self.core.step_infos()
+            obs = self.core.observations(np.array(done))
+            for i, k in enumerate(done):
+                final_obs = {key: v[i] for key, v in obs.items()} if isinstance(obs, dict) else obs[i]
+                final_info = {key: values[k] for key, values in before.items()}
+                final_info.update(finals[k])
+                entries[k] = {"final_obs": final_obs, "final_info": final_info}
+            self.core.reset_slots(done)
+        if done and done[0] == 0:  # slot 0's entries come first, as slot by slot
+            self._add_info(infos, entries.pop(0), 0)
+        self._add_step_infos(infos)
+        for k, entry in entries.items():
+            self._add_info(infos, entry, k)
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         if self.render_mode == "rgb_array":

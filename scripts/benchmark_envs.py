@@ -11,10 +11,14 @@ reference memory-gym==1.0.2, side by side in one run.
 (b) batched: the native core with 16 and 64 slots driven directly, as the trainer does: ``core.step`` on all slots
     with a constant no-op action, one ``core.reset_slots`` of the finished slots with fresh seeds, and a copy of all
     observations, for ``--batched-steps`` slot-steps after a short warm-up.
+(c) vector: what ``gymnasium.make_vec(id, num_envs=64)`` users get: ``step`` with a constant no-op action, the
+    vector env's own NEXT_STEP autoreset (finished slots continue their generators), observations and infos as
+    returned, for ``--batched-steps`` slot-steps after the same warm-up.
 
 Each measurement is repeated ``--repeats`` times, ours and the reference's (a) interleaved, and the best run is
 kept on both sides: the machine is shared, and the best run is the one least disturbed by other load.
-Ratios: ours/reference for (a), and (b, 64 slots)/reference (a). Results go to ``results/benchmarks/envs.json``.
+Ratios: ours/reference for (a), and (b, 64 slots)/reference (a) and (c)/reference (a). Results go to
+``results/benchmarks/envs.json``.
 
     python scripts/benchmark_envs.py                       # everything (several minutes with the reference)
     python scripts/benchmark_envs.py --ids MortarMayhem-v0 --quick --no-reference
@@ -82,6 +86,28 @@ def bench_batched(env_id: str, num_envs: int, slot_steps: int) -> dict[str, Any]
     return {"steps": steps, "episodes": episodes, "seconds": seconds, "steps_per_s": steps / seconds}
 
 
+def bench_vector(env_id: str, num_envs: int, slot_steps: int) -> dict[str, Any]:
+    """(c): ``gymnasium.make_vec`` with ``num_envs`` slots, its own NEXT_STEP autoreset, a constant no-op action."""
+    vec = gym.make_vec(env_id, num_envs=num_envs)
+    actions = np.stack([np.asarray(noop_action(vec.single_action_space))] * num_envs)
+    vec.reset(seed=0)
+
+    def run(steps: int) -> tuple[int, int]:
+        done_steps = episodes = 0
+        while done_steps < steps:
+            _, _, terminated, truncated, _ = vec.step(actions)
+            episodes += int(np.count_nonzero(terminated | truncated))
+            done_steps += num_envs
+        return done_steps, episodes
+
+    run(min(slot_steps // 10, 20 * num_envs))  # warm-up, as for (b)
+    start = time.perf_counter()
+    steps, episodes = run(slot_steps)
+    seconds = time.perf_counter() - start
+    vec.close()
+    return {"steps": steps, "episodes": episodes, "seconds": seconds, "steps_per_s": steps / seconds}
+
+
 def reference_single(env_id: str, episodes: int) -> float | None:
     """(a) of the reference package, run in its isolated venv (None when that venv does not exist)."""
     from scripts.reference.venv import run_reference_bench
@@ -105,7 +131,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         args.episodes, args.batched_steps, args.repeats = 3, 1024, 1
 
     rows: dict[str, Any] = {}
-    header = f"{'id':30s} {'ours (a)':>10s} {'ref (a)':>10s} {'ratio':>6s} {'b16':>10s} {'b64':>10s} {'b64/ref':>8s}"
+    header = (
+        f"{'id':30s} {'ours (a)':>10s} {'ref (a)':>10s} {'ratio':>6s} {'b16':>10s} {'b64':>10s} {'b64/ref':>8s} "
+        f"{'vec64':>10s} {'vec64/ref':>9s}"
+    )
     print(header)
     for env_id in args.ids:
         singles, references, batched_runs = [], [], []
@@ -113,7 +142,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             singles.append(bench_single(env_id, args.episodes, args.max_total_steps))
             if not args.no_reference:
                 references.append(reference_single(env_id, args.episodes))
-            batched_runs.append({f"b{n}": bench_batched(env_id, n, args.batched_steps) for n in SLOT_COUNTS})
+            runs = {f"b{n}": bench_batched(env_id, n, args.batched_steps) for n in SLOT_COUNTS}
+            runs["vec64"] = bench_vector(env_id, 64, args.batched_steps)
+            batched_runs.append(runs)
         single = max(singles, key=lambda run: run["steps_per_s"])
         batched = {
             key: max((runs[key] for runs in batched_runs), key=lambda r: r["steps_per_s"]) for key in batched_runs[0]
@@ -132,6 +163,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if reference:
             row["ratio_single"] = single["steps_per_s"] / reference
             row["ratio_b64_over_reference_single"] = batched["b64"]["steps_per_s"] / reference
+            row["ratio_vec64_over_reference_single"] = batched["vec64"]["steps_per_s"] / reference
         rows[env_id] = row
 
         def fmt(value: float | None, width: int = 10, spec: str = ".0f") -> str:
@@ -140,7 +172,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         print(
             f"{env_id:30s} {fmt(single['steps_per_s'])} {fmt(reference)} {fmt(row.get('ratio_single'), 6, '.2f')} "
             f"{fmt(batched['b16']['steps_per_s'])} {fmt(batched['b64']['steps_per_s'])} "
-            f"{fmt(row.get('ratio_b64_over_reference_single'), 8, '.1f')}",
+            f"{fmt(row.get('ratio_b64_over_reference_single'), 8, '.1f')} {fmt(batched['vec64']['steps_per_s'])} "
+            f"{fmt(row.get('ratio_vec64_over_reference_single'), 9, '.1f')}",
             flush=True,
         )
     report = {
@@ -149,6 +182,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             "single": "gymnasium.make, constant no-op action, episode k reset with seed k, resets timed",
             "batched": "core.step on all slots (constant no-op), finished slots reset with fresh seeds, "
             "observations copied; after a warm-up",
+            "vector": "gymnasium.make_vec with 64 slots, constant no-op action, its own NEXT_STEP autoreset "
+            "(generators continue), observations and infos as returned; after a warm-up",
             "episodes": args.episodes,
             "max_total_steps": args.max_total_steps,
             "batched_slot_steps": args.batched_steps,

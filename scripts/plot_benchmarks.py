@@ -1,4 +1,5 @@
-"""Bar chart of results/benchmarks/envs.json: steps/s of the reference (one env) and ours (one env, 16 and 64 slots).
+"""Bar chart of results/benchmarks/envs.json: steps/s of the reference (one env) and ours (one env, 16 and 64 slots,
+make_vec with 64 slots).
 
 Usage: python scripts/plot_benchmarks.py [--json results/benchmarks/envs.json] [--out results/benchmarks/envs.png]
 """
@@ -21,6 +22,7 @@ SERIES = (  # (label, how to read the value from one id's result)
     ("ours, 1 env", lambda r: r["single"]["steps_per_s"]),
     ("ours, 16 slots", lambda r: r["b16"]["steps_per_s"]),
     ("ours, 64 slots", lambda r: r["b64"]["steps_per_s"]),
+    ("ours, make_vec 64", lambda r: r["vec64"]["steps_per_s"] if "vec64" in r else None),
 )
 
 
@@ -45,7 +47,7 @@ def plot(results: dict, out: Path) -> None:
     ax.set_yscale("log")
     ax.set_ylabel("environment steps per second")
     ax.set_xticks(range(len(ids)), [env_id.replace("-v0", "") for env_id in ids], rotation=30, ha="right")
-    ax.legend(ncols=5, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 1.12))
+    ax.legend(ncols=6, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 1.12))
     ax.grid(axis="y", which="both", alpha=0.3)
     fig.tight_layout()
     image = io.BytesIO()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import envs
-from tests.dict_env import CORE, ENV_ID
+from tests.support.dict_env import CORE, ENV_ID
 
 
 @pytest.fixture

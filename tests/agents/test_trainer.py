@@ -21,7 +21,7 @@ from agents.models import log_probs_and_entropy, one_hot_actions
 from agents.sequences import pad_sequences, split_sequences
 from agents.trainer import Trainer, TrainingDiverged
 from scripts import train as train_script
-from tests.dict_env import DictCore
+from tests.support.dict_env import DictCore
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},

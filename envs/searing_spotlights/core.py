@@ -1,404 +1,55 @@
-"""``SearingSpotlights-v0`` and ``Endless-SearingSpotlights-v0``, natively batched.
-
-A dark room: moving spotlights reveal pieces of a chessboard floor and hurt the agent. In ``SearingSpotlights-v0``
-the agent collects the coin(s) and then reaches the exit; in the endless variant (``endless=True``) it collects one
-coin after another, each within ``steps_per_coin`` steps. The agent, the coins and the exit are drawn under the
-darkness by default, so they are seen only inside a spotlight (and in the first, still lit frames).
-
-How a frame is drawn, array-native across slots (frames are kept as (84, 252) byte rows). Most frames (darkness
-alpha 255, no spotlight rings) are "black everywhere, the picture under the darkness inside the spotlight holes",
-so a frame is ``hole_mask & under`` where
-
-* ``lit`` is kept per slot and changes only when a coin is taken or the exit opens: the floor plus the coins and
-  the exit, in a blue and a red (hit) version;
-* ``under`` is kept per slot too: the blue or red ``lit`` with the hidden agent on top. It is rebuilt when ``lit``
-  or the floor colour changes; an agent that moved or turned is erased (its rows copied back from ``lit``) and
-  pasted again, all slots in one scatter;
-* ``hole_mask`` is gathered row by row, straight into the frames, from one table of 0/255 rows, one row per
-  horizontal span ``[lo, hi]``: every filled disc of pygame is a stack of such spans, so each spotlight
-  contributes one table row per screen row. A screen row crossed by several spotlights gets the last span written
-  to it, and the other spans are OR-ed into the gathered row afterwards.
-
-Frames with a partly transparent darkness (the first steps while the light dims, ``light_threshold`` below 255)
-or with spotlight rings (``black_background``) blend ``under`` with the darkness using SDL's arithmetic,
-``D + trunc((S - D) * A / 255)``. The HUD rows come from small row tables.
-
-A frame is a function of the state (the spotlights keep where they were drawn), so ``observations()`` hands the
-frame buffer itself to the caller and the core continues in a new one; the few frames it must read before drawing
-them again (a partial step or a reset leaves the others as they were) are drawn again from the state.
-
-Mechanics per step are array operations as well: settings that depend only on the episode's options (velocities,
-bounds, the alpha of every step, draw orders) are derived once per distinct option set; whether the agent touches a
-coin or the exit is one lookup in a per-slot map of touching positions; spotlights are records in list order, with
-neutral values in unused positions so that the common step needs no masks. Only resets, spawns, pickups and the
-rare removal of finished spotlights run per slot.
-
-The mechanics follow memory-gym 1.0.2 (see docs/environment_notes.md, "Searing Spotlights", for the quirks that are
-kept and the few deliberate deviations).
-"""
+"""The Searing Spotlights core: state of arrays, step, reset and drawing of every slot (see the package docstring)."""
 
 from __future__ import annotations
 
 import math
-from functools import cache
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from envs.core import BatchedCore, Index
-from envs.drawing import KEY_BLUE, Sprite, SpriteScatter, agent_sprites, disc_mask, pygame, surface_to_sprite
+from envs.drawing import SpriteScatter, agent_sprites, disc_mask
 from envs.movement import continuous_heading, continuous_velocity
-from envs.options import Option
+from envs.records import as_bytes, bind_fields
 from envs.rng import DirectDraws
-
-SCREEN = 84
-ROW_BYTES = SCREEN * 3
-HUD_ROWS = 4  # the top bar; the walkable area starts below it
-TILE = 12  # chessboard square (int(50 * 0.25))
-CENTRE = SCREEN // 2
-SPOT_ORBIT = math.sqrt(SCREEN**2 + SCREEN**2) / 2  # spotlights start and end this far (+ radius) from the centre
-AGENT_BLOCK, ITEM_BLOCK = 28, 21  # spawn sampler blocking radii (the endless coin uses 28)
-ITEM_LOW, ITEM_HIGH = 7, SCREEN - 7  # coins and the exit are clamped into [7, 77]
-
-WHITE, BLACK = (255, 255, 255), (0, 0, 0)
-BLUE, RED, GREEN, YELLOW = (0, 0, 255), (255, 0, 0), (0, 255, 0), (255, 255, 0)
-HUD_GREY = (50, 50, 50)
-ACTION_COLOURS = ((120, 120, 120), (116, 1, 113), (255, 94, 14))
-COIN_FILL, COIN_RIM = (255, 255, 0), (255, 165, 0)
-EXIT_CLOSED, EXIT_OPEN = (55, 55, 55), (48, 141, 70)
-
-FLOOR_CHESS, FLOOR_WHITE, FLOOR_BLACK = 0, 1, 2
-
-
-def _common_options(endless: bool) -> dict[str, Option]:
-    return {
-        "max_steps": Option(-1 if endless else 256, "int", -1, None, doc="episode length cap; <= 0: no cap"),
-        "initial_spawns": Option(3 if endless else 4, "int", 0, 256, doc="spotlights created at reset"),
-        "spot_min_radius": Option(7.5, "float", 1, 42, doc="radius = integers(min, max + 1): an int in 7..13"),
-        "spot_max_radius": Option(13.75, "float", 1, 42),
-        "spot_min_speed": Option(0.0025, "float", 0, 1, doc="curve parameter advance per step"),
-        "spot_max_speed": Option(0.0075, "float", 0, 1),
-        "spot_damage": Option(1.0, "float", 0, None, doc="health lost per step while a spotlight touches the agent"),
-        "visual_feedback": Option(True, "bool", doc="red chessboard on the steps the agent is hit"),
-        "black_background": Option(False, "bool", doc="black floor; spotlights get a white 1-px ring"),
-        "hide_chessboard": Option(False, "bool", doc="white floor"),
-        "light_dim_off_duration": Option(6, "int", 0, None, doc="steps until full darkness; 0: dark at once"),
-        "light_threshold": Option(255, "int", 0, 255, doc="darkness alpha stops at the first step above this"),
-        "coin_scale": Option(0.375, "float", 0.1, 4.0, doc="coin radius int(10 * scale)"),
-        "coins_visible": Option(False, "bool", doc="draw coins above the darkness"),
-        "agent_speed": Option(3.0, "float", 0, 84),
-        "agent_health": Option(10 if endless else 5, "int", 1, None),
-        "agent_scale": Option(0.25, "float", 0.05, 1.0, doc="agent radius int(25 * scale)"),
-        "agent_visible": Option(False, "bool", doc="draw the agent above the darkness"),
-        "sample_agent_position": Option(True, "bool", doc="False: the agent starts at the centre (42, 42)"),
-        "show_last_action": Option(True, "bool", doc="HUD blocks with the previous action"),
-        "show_last_positive_reward": Option(True, "bool", doc="HUD block: was the previous reward positive"),
-        "reward_inside_spotlight": Option(0.0, "float", doc="per step while hit"),
-        "reward_outside_spotlight": Option(0.0, "float", doc="per step while not hit"),
-        "reward_death": Option(0.0, "float", doc="when health reaches 0"),
-        "reward_coin": Option(0.25, "float", doc="per coin"),
-    }
-
-
-SS_OPTIONS: dict[str, Option] = {
-    **_common_options(endless=False),
-    "num_spawns": Option(30, "int", 0, 100000, doc="spotlights spawned after reset, at most"),
-    "initial_spawn_interval": Option(30, "float", 0, None, doc="spawn interval = int(this + threshold) = 40"),
-    "spawn_interval_threshold": Option(10, "float", 0, None),
-    "spawn_interval_decay": Option(0.95, "float", 0, 1, doc="accepted; never applied (as in memory-gym)"),
-    "num_coins": Option([1], "int_list", 0, 10, allow_empty=True, doc="coin count, drawn from the list"),
-    "use_exit": Option(True, "bool", doc="after the coins, the exit must be reached"),
-    "exit_scale": Option(0.5, "float", 0.1, 4.0, doc="exit size 20 * scale"),
-    "exit_visible": Option(False, "bool", doc="draw the exit above the darkness"),
-    "reward_exit": Option(1.0, "float"),
-    "reward_max_steps": Option(0.0, "float", doc="accepted; unused (as in memory-gym)"),
-}
-ESS_OPTIONS: dict[str, Option] = {
-    **_common_options(endless=True),
-    "steps_per_coin": Option(160, "int", -1, None, doc="steps allowed per coin; <= 0: no limit"),
-    "spawn_interval": Option(50, "int", 1, None, doc="a spotlight spawns every this many steps"),
-    "coin_show_duration": Option(6, "int", 0, None, doc="a new coin is drawn above the darkness this long"),
-}
-
-
-# ------------------------------------------------------------------------------------------------ pictures
-def _rows(image: np.ndarray) -> np.ndarray:
-    """(84, 84, 3) image -> (84, 252) rows, the layout frames are kept in."""
-    return np.ascontiguousarray(image.reshape(image.shape[0], -1))
-
-
-@cache
-def floor_rows(kind: int, hit: bool) -> np.ndarray:
-    """The floor as (84, 252) rows: the chessboard (blue squares, red on a hit step), white or black."""
-    image = np.zeros((SCREEN, SCREEN, 3), dtype=np.uint8)
-    if kind == FLOOR_WHITE:
-        image[:] = WHITE
-    elif kind == FLOOR_CHESS:
-        squares = (np.arange(SCREEN) // TILE)[:, None] + (np.arange(SCREEN) // TILE)[None, :]
-        image[:] = RED if hit else BLUE
-        image[squares % 2 == 0] = WHITE
-    rows = _rows(image)
-    rows.setflags(write=False)
-    return rows
-
-
-@cache
-def floor_pair(kind: int, red_feedback: bool) -> np.ndarray:
-    """The floor of the lit pictures (see ``SearingSpotlightsCore.lit``): blue, then red on hit steps if
-    ``red_feedback``."""
-    pair = np.stack([floor_rows(kind, False), floor_rows(kind, red_feedback)])
-    pair.setflags(write=False)
-    return pair
-
-
-@cache
-def coin_sprite(scale: float) -> Sprite:
-    """A coin: a yellow disc with an orange rim of width int(2 * scale); width 0 makes pygame fill it orange."""
-    radius = int(10 * scale)
-    size = 2 * radius + 2
-    surface = pygame.Surface((size, size))
-    surface.fill(KEY_BLUE)
-    pygame.draw.circle(surface, COIN_FILL, (radius, radius), radius)
-    pygame.draw.circle(surface, COIN_RIM, (radius, radius), radius, int(2 * scale))
-    return surface_to_sprite(surface, KEY_BLUE)  # centred on pixel (radius, radius), one above height // 2
-
-
-@cache
-def exit_sprite(scale: float, is_open: bool) -> Sprite:
-    """The exit door: rounded top corners, a 1-px black outline, grey while closed and green once open."""
-    surface = pygame.Surface((20 * scale, 20 * scale))
-    surface.fill(KEY_BLUE)
-    rect = surface.get_rect()
-    corners = (int(10 * scale), int(10 * scale), 0, 0)
-    pygame.draw.rect(surface, EXIT_OPEN if is_open else EXIT_CLOSED, rect, 0, 0, *corners)
-    pygame.draw.rect(surface, BLACK, rect, int(2 * scale), 0, *corners)
-    return surface_to_sprite(surface, KEY_BLUE)
-
-
-@cache
-def ring_mask(radius: int) -> np.ndarray:
-    """Pixels of pygame's 1-px circle outline of ``radius`` (same frame as :func:`envs.drawing.disc_mask`)."""
-    size = 2 * radius + 2
-    surface = pygame.Surface((size, size))
-    surface.fill(BLACK)
-    pygame.draw.circle(surface, WHITE, (radius, radius), radius, 1)
-    mask = pygame.surfarray.array3d(surface)[:, :, 0].T == 255
-    mask.setflags(write=False)
-    return mask
-
-
-# ------------------------------------------------------------------------- spotlight holes as row spans
-def span_code(lo: np.ndarray | int, hi: np.ndarray | int) -> np.ndarray | int:
-    """Index of the span [lo, hi] (0 <= lo <= hi <= 83) in :func:`span_rows`; 0 is the empty span."""
-    return lo * (2 * SCREEN - 1 - lo) // 2 + hi + 1
-
-
-@cache
-def span_rows() -> np.ndarray:
-    """One 0/255 row of 252 bytes per span code: 255 on the three channels of the pixels lo..hi."""
-    lo, hi = np.triu_indices(SCREEN)
-    codes = span_code(lo, hi)
-    table = np.zeros((int(codes.max()) + 1, ROW_BYTES), dtype=np.uint8)
-    column = np.arange(ROW_BYTES) // 3
-    table[codes] = np.where((column >= lo[:, None]) & (column <= hi[:, None]), 255, 0)
-    table.setflags(write=False)
-    return table
-
-
-class HoleTables:
-    """Per radius r and integer centre coordinate c, the rows of pygame's filled disc as flat table rows.
-
-    Row ``r * width + c - low`` of ``codes`` holds, for each disc row j (of 2 * max_radius), the code of that row's
-    span for a centre column c (0 when the row is empty or off-screen); the same row of ``rows`` holds the screen row
-    for a centre row c (0 when it is under the HUD or off-screen, row 0 is never a hole). Spotlight centres stay
-    within ``SPOT_ORBIT + radius`` of the screen centre, so ``[low, low + width)`` covers every reachable one.
-
-    Codes index ``span_rows``, the 0/255 rows of only the spans that discs up to ``max_radius`` can make (950 of
-    the 3571 spans for radius 13: a 234 KB table, read at random rows every step, stays in the cache).
-    """
-
-    def __init__(self, max_radius: int) -> None:
-        reach = math.ceil(SPOT_ORBIT + max_radius) + 1
-        self.max_radius = max_radius
-        self.low = CENTRE - reach
-        self.width = 2 * reach + 1
-        centres = np.arange(self.low, self.low + self.width)
-        depth = 2 * max_radius
-        # (int16: small tables and small gathered copies stay in the cache; a code is below 2**12, a row below 84)
-        self.codes = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.int16)
-        self.rows = np.zeros(((max_radius + 1) * self.width, depth), dtype=np.int16)
-        for radius in range(1, max_radius + 1):
-            mask, offset = disc_mask(radius)
-            block = slice(radius * self.width, (radius + 1) * self.width)
-            for j in range(2 * radius):
-                filled = np.flatnonzero(mask[j])
-                lo, hi = centres + filled[0] + offset, centres + filled[-1] + offset
-                visible = (hi >= 0) & (lo < SCREEN)
-                code = span_code(np.clip(lo, 0, SCREEN - 1), np.clip(hi, 0, SCREEN - 1))
-                self.codes[block, j] = np.where(visible, code, 0)
-                row = centres + j + offset
-                self.rows[block, j] = np.where((row >= HUD_ROWS) & (row < SCREEN), row, 0)
-        used = np.unique(self.codes)  # (0, the empty span, first)
-        self.codes = np.searchsorted(used, self.codes).astype(np.int16)
-        self.span_rows = span_rows()[used]
-        self.span_words = self.span_rows.view(np.uint32)  # 63 words per row, for OR-ing
-        # 0/1 per entry: whether the span, the row is visible (multiplying by these is cheaper than comparisons)
-        self.codes_visible = np.minimum(self.codes, 1)
-        self.rows_visible = np.minimum(self.rows, 1)
-        # whether a table row has any visible span (a disc partly on the screen horizontally) or row (vertically)
-        self.columns_seen = self.codes.any(axis=1)
-        self.rows_seen = self.rows.any(axis=1)
-        for table in (self.codes, self.rows, self.codes_visible, self.rows_visible, self.columns_seen, self.rows_seen):
-            table.setflags(write=False)
-        self.span_rows.setflags(write=False)
-
-    def base(self, radius: np.ndarray | int) -> np.ndarray | int:
-        """Offset that turns a spotlight's integer centre coordinate into its table row."""
-        return radius * self.width - self.low
-
-
-@cache
-def hole_tables(max_radius: int) -> HoleTables:
-    return HoleTables(max_radius)
-
-
-# ------------------------------------------------------------------------------------------------ blending
-def darken(rows: np.ndarray, alpha: np.ndarray | int) -> np.ndarray:
-    """SDL's blend of a black overlay with per-surface ``alpha``: ``D - floor(D * A / 255)`` (exact, uint16).
-
-    Every pass has one dtype: numpy's mixed-dtype loops are buffered and several times slower.
-    """
-    product = rows.astype(np.uint16)
-    product *= np.asarray(alpha, np.uint16)
-    product //= 255  # (numpy divides by a constant without a division per element)
-    share = product.astype(np.uint8)
-    return np.subtract(rows, share, out=share)
-
-
-def lighten(rows: np.ndarray, alpha: int) -> np.ndarray:
-    """SDL's blend of a white overlay (the spotlight rings): ``D + floor((255 - D) * A / 255)``."""
-    return 255 - darken(255 - rows, np.asarray(alpha))
-
-
-# ------------------------------------------------------------------------------------------------ HUD rows
-def paint_hud_row(
-    endless: bool, show_action: bool, show_reward: bool, action: tuple[int, int], reward_state: int, red: int
-) -> np.ndarray:
-    """One row of the 4-row top bar, painted in the reference's order (all four rows are equal).
-
-    ``action`` is the previous action, ``reward_state`` 0 before the first step, then 1 (previous reward not
-    positive) or 2 (positive), ``red`` the width of the red (lost health) part.
-    """
-    row = np.zeros((SCREEN, 3), dtype=np.uint8)
-    row[:] = BLACK if endless else HUD_GREY
-    row[: SCREEN // 2] = GREEN
-    if show_action:
-        row[42:63] = ACTION_COLOURS[action[0]]
-        row[63:84] = ACTION_COLOURS[action[1]]
-    if red > 0:
-        row[:red] = RED
-    if show_reward and reward_state:
-        block = slice(57, 67) if show_action else slice(42, 84)
-        row[block] = YELLOW if reward_state == 2 else HUD_GREY
-    return row.reshape(-1)
-
-
-@cache
-def reset_hud_row(endless: bool, show_action: bool, show_reward: bool) -> np.ndarray:
-    """The HUD row of a reset frame: full health, grey no-op action blocks, no reward block yet."""
-    return paint_hud_row(endless, show_action, show_reward, (0, 0), 0, 0)
-
-
-@cache
-def hud_tables() -> tuple[np.ndarray, np.ndarray]:
-    """Left halves by red width (0..42) and right halves by ``flags * 27 + a0 * 9 + a1 * 3 + reward_state``."""
-    half = ROW_BYTES // 2
-    left = np.stack([paint_hud_row(False, False, False, (0, 0), 0, red)[:half] for red in range(SCREEN // 2 + 1)])
-    right = []
-    for flags in range(8):
-        endless, show_action, show_reward = bool(flags & 4), bool(flags & 2), bool(flags & 1)
-        for code in range(27):
-            action, reward_state = (code // 9, code // 3 % 3), code % 3
-            right.append(paint_hud_row(endless, show_action, show_reward, action, reward_state, 0)[half:])
-    return left, np.stack(right)
-
-
-# ------------------------------------------------------------------------------------------------ sampler
-@cache
-def orbit_points(radius: int) -> tuple[complex, ...]:
-    """Points at the angles 0..719 degrees on a spotlight's orbit (pygame's rotation, for the reference's floats).
-
-    Spotlights start, turn and end at angles ``start`` (0..359), ``start + 180 + (-45..44)`` and that plus
-    ``-135..134``, all within 0..719. (Python complex numbers: a spotlight record is built from a tuple of them.)
-    """
-    orbit = pygame.math.Vector2(SPOT_ORBIT + radius, 0)
-    points = [SCREEN_CENTRE + orbit.rotate(float(angle)) for angle in range(720)]
-    return tuple(complex(point.x, point.y) for point in points)
-
-
-@cache
-def _block_disc(radius: int) -> np.ndarray:
-    """Pixels at squared distance < radius^2 from the centre, as a (2r-1, 2r-1) mask."""
-    offsets = np.arange(-radius + 1, radius)
-    return offsets[:, None] ** 2 + offsets[None, :] ** 2 < radius * radius
-
-
-def block_position(mask: np.ndarray, x: int, y: int, radius: int) -> None:
-    """Mark the pixels within ``radius`` (exclusive) of (x, y) as taken in the (84, 84) [y, x] spawn mask."""
-    disc = _block_disc(radius)
-    top, left = y - radius + 1, x - radius + 1
-    r0, c0 = max(top, 0), max(left, 0)
-    r1, c1 = min(top + disc.shape[0], SCREEN), min(left + disc.shape[1], SCREEN)
-    if r0 < r1 and c0 < c1:
-        mask[r0:r1, c0:c1] |= disc[r0 - top : r1 - top, c0 - left : c1 - left]
-
-
-def sample_position(
-    mask: np.ndarray, rng: np.random.Generator | DirectDraws, radius: int, empty: bool = False
-) -> tuple[int, int]:
-    """A uniformly drawn free pixel (row-major order of the free ones), which is then blocked with ``radius`` (0:
-    not blocked, for the last draw from a mask).
-
-    ``empty`` says that nothing is blocked yet, so the drawn index is the pixel itself.
-    """
-    if empty:
-        cell = int(rng.integers(0, SCREEN * SCREEN))
-    else:
-        free = (~mask).reshape(-1).nonzero()[0]
-        if free.size == 0:
-            raise RuntimeError("no free spawn position left: too many coins for the arena (reduce num_coins)")
-        cell = int(free[rng.integers(0, free.size)])
-    y, x = divmod(cell, SCREEN)
-    if radius:
-        block_position(mask, x, y, radius)
-    return x, y
-
-
-def _clamp_item(value: int) -> int:
-    return min(max(value, ITEM_LOW), ITEM_HIGH)
-
-
-# ------------------------------------------------------------------------------------------------ the core
-def draw_order(entities: list[tuple[str, int, bool]]) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """Which visible entities go above the darkness, and which (a quirk) above the HUD, in drawing order.
-
-    The reference builds its list ``[floor, darkness, hud]`` and inserts each entity (coins, exit, agent in this
-    order) at the darkness position if it is hidden (shifting the darkness back), else at ``darkness + offset``
-    with a fixed offset per entity (coins 1, exit 2, agent 3), so some visible entities end up after the HUD.
-    Hidden entities are always drawn under the darkness in the order coins, exit, agent.
-    """
-    layers = ["floor", "darkness", "hud"]
-    darkness = 1
-    for name, offset, visible in entities:
-        if visible:
-            layers.insert(darkness + offset, name)
-        else:
-            layers.insert(darkness, name)
-            darkness += 1
-    hud = layers.index("hud")
-    return tuple(layers[darkness + 1 : hud]), tuple(layers[hud + 1 :])
-
+from envs.searing_spotlights.frames import (
+    ALPHA_STEPS,
+    alpha_schedule,
+    darken,
+    draw_order,
+    hud_tables,
+    lighten,
+    paint_hud_row,
+    paste_centred,
+    reset_hud_row,
+)
+from envs.searing_spotlights.holes import hole_tables
+from envs.searing_spotlights.options import ESS_OPTIONS, SS_OPTIONS
+from envs.searing_spotlights.pictures import (
+    CENTRE,
+    FLOOR_BLACK,
+    FLOOR_CHESS,
+    FLOOR_WHITE,
+    HUD_ROWS,
+    ROW,
+    ROW_BYTES,
+    SCREEN,
+    coin_sprite,
+    exit_sprite,
+    floor_pair,
+    floor_rows,
+    ring_mask,
+)
+from envs.searing_spotlights.records import EPISODE, EXIT_BIT, NEVER, OPEN_EXIT_BIT, SETTINGS, SPOTS, mark_touch
+from envs.searing_spotlights.sampler import (
+    AGENT_BLOCK,
+    ITEM_BLOCK,
+    block_position,
+    clamp_item,
+    orbit_points,
+    sample_position,
+)
 
 # Heading index (heading // 45; -1: unchanged) per action code ``3 * horizontal + vertical``.
 ACTION_PAIRS = np.array([(h, v) for h in range(3) for v in range(3)])
@@ -406,157 +57,7 @@ _HEADINGS = continuous_heading(ACTION_PAIRS, np.full(9, -1))
 ACTION_HEADING = np.where(_HEADINGS < 0, -1, _HEADINGS // 45)
 ACTION_WEIGHTS = np.array([3, 1])
 NEXT_HEADING = np.where(ACTION_HEADING[None, :] < 0, np.arange(8)[:, None], ACTION_HEADING[None, :])  # [heading, code]
-ROW = np.dtype((np.void, ROW_BYTES))  # one frame row as a single item, for fast row gathers and scatters
-NEVER = np.iinfo(np.int64).max
 UNDER_KEY_POSITION = np.array([1 << 1, 1 << 8])  # (x, y) -> their bits in the under key
-SCREEN_CENTRE = pygame.math.Vector2(CENTRE, CENTRE)
-
-
-def paste_centred(sprite: Sprite, rows: np.ndarray, x: int, y: int, centre: int | None = None) -> None:
-    """Paste ``sprite`` with its centre pixel on (x, y) into (..., 84, 252) rows, clipped.
-
-    The centre is (height // 2, width // 2), or (centre, centre) when given (the coin's canvas is one px larger).
-    """
-    frames = rows.reshape(*rows.shape[:-1], SCREEN, 3)
-    top, left = (sprite.height // 2, sprite.width // 2) if centre is None else (centre, centre)
-    sprite.paste(frames, int(y) - top, int(x) - left)
-
-
-ALPHA_STEPS = 258  # the darkness alpha is constant after at most 256 increments
-
-
-def alpha_schedule(duration: int, threshold: int) -> np.ndarray:
-    """The darkness alpha at steps 0, 1, ...: the reference's dimming rule, run until it is constant."""
-    alpha = 0 if duration > 0 else threshold
-    schedule = [alpha]
-    for _ in range(ALPHA_STEPS - 1):
-        if alpha <= threshold:  # SDL clamps the per-surface alpha to 255
-            alpha = min(alpha + int(255 / duration), 255) if duration > 0 else min(threshold, 255)
-        schedule.append(alpha)
-    return np.array(schedule, np.int16)
-
-
-def as_bytes(records: np.ndarray | np.void) -> np.ndarray:
-    """The same records as opaque items of their size: whole-record copies then skip numpy's field-by-field casts
-    (a fancy-indexed structured assignment costs tens of microseconds; as bytes, a fraction of one)."""
-    records = np.asarray(records)
-    return records.view(np.dtype((np.void, records.dtype.itemsize)))
-
-
-# Per-episode settings of a slot, derived once per distinct set of options (see ``_episode_settings``).
-SETTINGS = np.dtype(
-    [
-        ("end_t", np.int64),  # max_steps, or never
-        ("pos_low", np.int64, (2,)),  # the agent centre is clamped into [low, high] (x, y)
-        ("pos_high", np.int64, (2,)),
-        ("vel", np.int64, (9, 2)),  # (dx, dy) per action code
-        ("agent_radius", np.int64),
-        ("agent_sprite0", np.int64),  # id of the heading-0 agent sprite in the core's SpriteScatter
-        ("max_health", np.float64),
-        ("spot_damage", np.float64),
-        ("reward_inside", np.float64),
-        ("reward_outside", np.float64),
-        ("reward_death", np.float64),
-        ("reward_coin", np.float64),
-        ("reward_exit", np.float64),
-        ("floor_kind", np.int64),
-        ("red_feedback", bool),  # visual_feedback on a chessboard floor
-        ("rings", bool),  # black_background: spotlights get a white outline
-        ("alphas", np.int16, (ALPHA_STEPS,)),  # darkness alpha at step t (the last entry from then on)
-        ("blend_until", np.int64),  # frames are blended before this step (partly transparent darkness, rings)
-        ("spawn_interval", np.int64),
-        ("hud_flags27", np.int64),  # 27 * (4 * endless + 2 * show_last_action + show_last_positive_reward)
-        ("hud_next", np.int64),  # hud_flags27 + 1: the base of the next step's HUD code
-        ("agent_hidden", bool),
-        ("agent_key", np.int64),  # the hidden agent's part of the under key (see ``_update_under``), facing up
-        ("heading_key", np.int64),  # what a heading step adds to it
-        ("any_visible", bool),  # some entity is drawn above the darkness
-        ("coins_visible", bool),
-        ("coin_show_duration", np.int64),
-        ("steps_per_coin", np.int64),
-        ("use_exit", bool),
-        ("coin_scale", np.float64),
-        ("coin_sprite", np.int64),  # id of the coin sprite in the core's coin SpriteScatter
-        ("coin_reach", np.int64),  # coin radius + agent radius
-        ("exit_scale", np.float64),
-        ("exit_reach", np.float64),  # exit radius + agent radius
-    ],
-    align=True,  # padded: every field aligned in every record (unaligned fields take slower numpy loops)
-)
-
-# The state of a slot's episode; a reset writes one start record per distinct option set (see ``_derive_settings``)
-# and then the drawn level.
-EPISODE = np.dtype(
-    [
-        ("t", np.int64),
-        ("end_t_now", np.int64),  # the episode ends at this step (the endless coin clock moves it)
-        ("heading", np.int64),
-        ("pos", np.int64, (2,)),  # agent centre (x, y)
-        ("health", np.float64),
-        ("hud_red", np.int64),  # width of the red (lost health) part of the bar
-        ("hit", bool),
-        ("next_spawn", np.int64),
-        ("spawns_left", np.int64),
-        ("spot_count", np.int64),
-        ("coins_collected", np.int64),
-        ("coins_left", np.int64),
-        ("num_coins", np.int64),
-        ("coin_shown_until", np.int64),
-        ("special_until", np.int64),  # entities are drawn above the darkness before this step
-        ("success", np.int64),
-        ("exit_x", np.int64),
-        ("exit_y", np.int64),
-        ("exit_open", bool),
-        ("goal_without_exit", bool),  # no exit: the episode ends with the last coin
-        ("next_hud", np.int64),
-    ],
-    align=True,  # padded: every field aligned in every record (unaligned fields take slower numpy loops)
-)
-
-# A slot's spotlights in list order. An unused position is never drawn (radius 0), never hits (negative reach),
-# never moves (speed 0) and sits at the screen centre, inside the hole tables.
-SPOTS = np.dtype(
-    [
-        ("radius", np.int64),
-        ("base", np.intp),  # hole table offset of the radius
-        ("reach", np.float64),  # hit distance: radius + agent radius
-        ("speed", np.float64),
-        ("tau", np.float64),
-        ("start", np.complex128),
-        ("target", np.complex128),
-        ("offset", np.complex128),
-        ("centre", np.complex128),  # where it was drawn in the last step
-        ("done", bool),
-        ("listed", bool),
-        ("drawn", bool),
-    ],
-    align=True,  # padded: every field aligned in every record (unaligned fields take slower numpy loops)
-)
-
-# Bits of the per-slot item map: which coins (bits 0..9) and whether the exit (bit 14) touch an agent centred on a
-# pixel; bit 15 asks for the exit to open at the next step (no coins at all).
-EXIT_BIT, OPEN_EXIT_BIT = 1 << 14, 1 << 15
-
-
-@cache
-def touch_stamp(reach: float, bit: int) -> np.ndarray:
-    """``bit`` on the offsets (-r..r in y and x) whose distance is at most ``reach``, computed like pygame's
-    distance_to; 0 elsewhere."""
-    r = int(math.floor(reach))
-    offsets = np.arange(-r, r + 1)
-    stamp = np.where(np.sqrt(offsets[None, :] ** 2 + offsets[:, None] ** 2) <= reach, bit, 0).astype(np.uint16)
-    stamp.setflags(write=False)
-    return stamp
-
-
-def mark_touch(item_map: np.ndarray, x: int, y: int, reach: float, bit: int) -> None:
-    """Set ``bit`` in the (84, 84) [y, x] map wherever an agent centre is within ``reach`` of (x, y)."""
-    stamp = touch_stamp(float(reach), bit)
-    r = stamp.shape[0] // 2
-    top, left = y - r, x - r
-    r0, c0 = max(top, 0), max(left, 0)
-    r1, c1 = min(top + stamp.shape[0], SCREEN), min(left + stamp.shape[1], SCREEN)
-    item_map[r0:r1, c0:c1] |= stamp[r0 - top : r1 - top, c0 - left : c1 - left]
 
 
 class SearingSpotlightsCore(BatchedCore):
@@ -583,8 +84,7 @@ class SearingSpotlightsCore(BatchedCore):
         self.all_slots = np.arange(n)
         self.settings = np.zeros(n, SETTINGS)
         self.settings_bytes = as_bytes(self.settings)
-        for name in SETTINGS.names:  # attribute views of the settings columns
-            setattr(self, name, self.settings[name])
+        bind_fields(self, self.settings)  # attribute views of the settings columns
         self.orders: list[dict[bool, tuple[tuple[str, ...], tuple[str, ...]]]] = [{} for _ in range(n)]
         self.agent_sprites = SpriteScatter()  # every agent scale met so far (settings hold the first id)
         self.coin_sprites = SpriteScatter()  # every coin scale met so far
@@ -593,8 +93,7 @@ class SearingSpotlightsCore(BatchedCore):
         i64 = np.int64
         self.episode = np.zeros(n, EPISODE)
         self.episode_bytes = as_bytes(self.episode)
-        for name in EPISODE.names:  # attribute views of the state columns
-            setattr(self, name, self.episode[name])
+        bind_fields(self, self.episode)  # attribute views of the state columns
         self.x, self.y = self.pos[:, 0], self.pos[:, 1]
         self.hud = np.zeros((n, ROW_BYTES), np.uint8)  # the HUD row of the current frame
         self.coin_x = np.zeros((n, 1), i64)
@@ -834,11 +333,11 @@ class SearingSpotlightsCore(BatchedCore):
         for j in range(num_coins):
             cx, cy = sample_position(mask, draws, ITEM_BLOCK)
             cx, cy = cx + draws.integers(2, 4), cy + draws.integers(2, 4)
-            self._place_coin(k, j, _clamp_item(cx), _clamp_item(cy))
+            self._place_coin(k, j, clamp_item(cx), clamp_item(cy))
         if opts["use_exit"]:
             ex, ey = sample_position(mask, draws, 0)  # (the last draw from this mask)
             ex, ey = ex + draws.integers(2, 4), ey + draws.integers(2, 4)
-            self.exit_x[k], self.exit_y[k] = _clamp_item(ex), _clamp_item(ey)
+            self.exit_x[k], self.exit_y[k] = clamp_item(ex), clamp_item(ey)
             if num_coins == 0:
                 self.item_map[k] |= OPEN_EXIT_BIT  # the exit opens in the first step
 
@@ -859,7 +358,7 @@ class SearingSpotlightsCore(BatchedCore):
         cx, cy = sample_position(mask, draws, 0, empty=previous is None)  # (the mask is not drawn from again)
         cx, cy = cx + draws.integers(2, 4), cy + draws.integers(2, 4)
         self.item_map[k] = 0
-        self._place_coin(k, 0, _clamp_item(cx), _clamp_item(cy))
+        self._place_coin(k, 0, clamp_item(cx), clamp_item(cy))
 
     # ---------------------------------------------------------------------------------------------- step
     def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1392,6 +891,12 @@ class SearingSpotlightsCore(BatchedCore):
             return {}
         position = [self.pos.item(k, 0), self.pos.item(k, 1), self.coin_x.item(k, 0), self.coin_y.item(k, 0)]
         return {"ground_truth": np.divide(position, float(SCREEN))}  # float64, as in the reference
+
+    def _step_infos(self) -> dict[str, np.ndarray]:
+        if not self.endless:
+            return {}
+        position = np.concatenate([self.pos, self.coin_x[:, :1], self.coin_y[:, :1]], axis=1)
+        return {"ground_truth": np.divide(position, float(SCREEN))}
 
     def _debug_frame(self, k: int) -> np.ndarray:
         """Floor, the darkness with the last step's holes, then exit, coins, agent and HUD above it."""

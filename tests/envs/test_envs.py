@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+import re
 from typing import Any
 
 import gymnasium as gym
@@ -266,3 +267,226 @@ def test_registry_lists_every_id() -> None:
     for env_id in ALL_IDS:
         assert env_id in gym.registry
     assert envs.make_core(ALL_IDS[0], num_envs=2).num_envs == 2
+
+
+def bad_actions(space: gym.Space) -> list[tuple[Any, str]]:
+    """Single actions outside ``space``, each with a pattern of what the refusal names."""
+    if isinstance(space, gym.spaces.Discrete):
+        return [
+            (space.n, rf"action {space.n} is outside the action space Discrete\({space.n}\)"),
+            (-1, r"action -1 is outside"),
+            (1.0, r"action 1.0 has dtype float64; actions are integers \(integer-valued floats too"),
+            ([1], r"action \[1\] has shape \(1,\), expected \(\)"),
+            (True, r"action True has dtype bool"),
+        ]
+    high = int(space.nvec[0])
+    return [
+        (5, r"action 5 has shape \(\), expected \(2,\): an action in MultiDiscrete\(\[3, 3\]\)"),
+        ([high, 0], rf"action \[{high}, 0\] is outside the action space MultiDiscrete\(\[3, 3\]\)"),
+        ([0, -1], r"action \[0, -1\] is outside"),
+        ([1, 1, 1], r"action \[1, 1, 1\] has shape \(3,\), expected \(2,\)"),
+        (np.array([0.0, 1.0]), r"action \[0.0, 1.0\] has dtype float64"),
+    ]
+
+
+def replay_after(env: gym.Env, twin: gym.Env, steps: int, rng: np.random.Generator) -> None:
+    """``env`` (which refused actions) and ``twin`` (which never saw them) play on identically."""
+    for t in range(steps):
+        action = random_action(env.action_space, rng)
+        got, want = env.step(action), twin.step(action)
+        assert_step((got[0], *got[1:3], got[4]), (want[0], *want[1:3], want[4]), f"step {t} after the refusals")
+        if got[2]:
+            break
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_actions_outside_the_space_are_refused_without_changing_any_state(env_id: str) -> None:
+    env, twin = gym.make(env_id), gym.make(env_id)
+    env.reset(seed=3)
+    twin.reset(seed=3)
+    for t, (action, message) in enumerate(bad_actions(env.action_space)):
+        with pytest.raises(ValueError, match=rf"slot 0: {message}"):
+            env.step(action)
+        if t == 1:  # a valid step between refusals
+            action = random_action(env.action_space, np.random.default_rng(t))
+            assert_step(env.step(action)[:3] + (None,), twin.step(action)[:3] + (None,), "valid step")
+    replay_after(env, twin, 30, np.random.default_rng(1))
+
+    # the native vector face: the slot is named; the count and the shape of the batch are checked
+    venv, vtwin = gym.make_vec(env_id, num_envs=4), gym.make_vec(env_id, num_envs=4)
+    venv.reset(seed=5)
+    vtwin.reset(seed=5)
+    valid = np.stack([np.asarray(random_action(venv.single_action_space, np.random.default_rng(k))) for k in range(4)])
+    with pytest.raises(ValueError, match=r"got actions of shape \(3,.*for 4 slots"):
+        venv.step(valid[:3])
+    discrete = isinstance(venv.single_action_space, gym.spaces.Discrete)
+    for k, action in ((1, 9), (2, -3)) if discrete else ((1, [3, 0]), (2, [0, -3])):
+        batch = valid.copy()
+        batch[k] = action
+        with pytest.raises(ValueError, match=rf"slot {k}: action {re.escape(str(action))} is outside the action space"):
+            venv.step(batch)
+    with pytest.raises(ValueError, match=r"slot 0: .* has dtype float64"):
+        venv.step(valid.astype(np.float64))
+    rng = np.random.default_rng(2)
+    restarted = False
+    for _ in range(600):  # also while slots wait for their NEXT_STEP autoreset (their action is checked too)
+        batch = np.stack([np.asarray(random_action(venv.single_action_space, rng)) for _ in range(4)])
+        if venv._needs_reset.any():
+            k = int(np.flatnonzero(venv._needs_reset)[0])
+            wrong = batch.copy()
+            wrong[k] = -1
+            with pytest.raises(ValueError, match=rf"slot {k}: action .*-1"):
+                venv.step(wrong)
+            restarted = True
+        got, want = venv.step(batch), vtwin.step(batch)
+        np.testing.assert_array_equal(image_of(got[0]), image_of(want[0]))
+        assert got[1].tolist() == want[1].tolist() and got[2].tolist() == want[2].tolist()
+        assert same(got[4], want[4])
+        if restarted:
+            break
+    assert restarted
+
+    # the batched core (what the trainer drives), with and without an index of stepped slots
+    core, core_twin = make_core(env_id, num_envs=4), make_core(env_id, num_envs=4)
+    core.reset_slots(range(4), range(4))
+    core_twin.reset_slots(range(4), range(4))
+    action, message = bad_actions(core.single_action_space)[1]  # the shape of an action, a value outside
+    with pytest.raises(ValueError, match=rf"slot 3: {message}"):
+        core.step(np.stack([valid[0], np.asarray(action)]), idx=[1, 3])
+    with pytest.raises(ValueError, match=r"got actions of shape \(4,.*for 2 slots"):
+        core.step(valid, idx=[0, 1])
+    for _ in range(20):
+        got, want = core.step(valid), core_twin.step(valid)
+        assert got[0].tolist() == want[0].tolist() and got[1].tolist() == want[1].tolist()
+        np.testing.assert_array_equal(image_of(core.observations()), image_of(core_twin.observations()))
+
+
+def test_readme_table_names_every_id_with_its_spaces() -> None:
+    """The README's environment table: one row per id, its action space, and its observation with the real keys."""
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    table = readme[readme.index("## Environments") : readme.index("## Training")]
+
+    def describe(space: gym.spaces.Box) -> str:
+        return f"{'x'.join(map(str, space.shape))} {space.dtype}"
+
+    for env_id in ALL_IDS:
+        rows = [line for line in table.splitlines() if line.startswith(f"| `{env_id}` |")]
+        assert len(rows) == 1, f"{env_id}: {len(rows)} rows in the README's environment table"
+        actions, observation = (cell.strip() for cell in rows[0].split("|")[3:5])
+        core = make_core(env_id)
+        action_space = core.single_action_space
+        if isinstance(action_space, gym.spaces.Discrete):
+            assert actions == f"Discrete({action_space.n})", (env_id, actions)
+        else:
+            assert actions == f"MultiDiscrete({action_space.nvec.tolist()})".replace(" ", ""), (env_id, actions)
+        space = core.single_observation_space
+        if isinstance(space, gym.spaces.Dict):
+            for key, sub in space.spaces.items():
+                assert f"`{key}`: {describe(sub)}" in observation, (env_id, key, observation)
+        else:
+            assert observation == describe(space), (env_id, observation)
+
+
+class SlotBySlotVectorEnv(envs.MemoryGymVectorEnv):
+    """The vector face as it assembled infos before: every slot's ``step_info`` merged with its final info, through
+    gymnasium's ``_add_info``, one slot after the other (the format the array assembly must reproduce)."""
+
+    def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+        options = dict(options or {})
+        mask = np.asarray(options.pop("reset_mask", np.ones(self.num_envs, dtype=bool)), dtype=bool)
+        obs, _ = super().reset(seed=seed, options={**options, "reset_mask": mask})
+        infos: dict[str, Any] = {}
+        for k in np.flatnonzero(mask).tolist():
+            infos = self._add_info(infos, self.core.step_info(k), k)
+        return obs, infos
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
+        n = self.num_envs
+        rewards = np.zeros(n, dtype=np.float64)
+        terminated = np.zeros(n, dtype=bool)
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._needs_reset.any():
+            restart, live = np.flatnonzero(self._needs_reset), np.flatnonzero(~self._needs_reset)
+            finals = {}
+            if live.size:
+                r, t, finals = self.core.step(actions[live], idx=live)
+                rewards[live], terminated[live] = r, t
+            self.core.reset_slots(restart)
+        else:
+            rewards, terminated, finals = self.core.step(actions)
+        final_obs = self.core.observations() if self.autoreset_mode == AutoresetMode.SAME_STEP else None
+        for k in range(n):
+            info = self.core.step_info(k)
+            info.update(finals.get(k, {}))
+            if final_obs is not None and terminated[k]:
+                obs_k = {key: v[k] for key, v in final_obs.items()} if isinstance(final_obs, dict) else final_obs[k]
+                infos = self._add_info(infos, {"final_obs": obs_k, "final_info": info}, k)
+                self.core.reset_slot(k)
+                info = self.core.step_info(k)
+            if info:
+                infos = self._add_info(infos, info, k)
+        self._needs_reset = terminated.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
+        return self.core.observations(), rewards, terminated, np.zeros(n, dtype=bool), infos
+
+
+def assert_same_infos(got: dict[str, Any], want: dict[str, Any], where: str) -> None:
+    """Same keys in the same order, same dtypes and shapes, same values (object arrays element by element)."""
+    assert list(got) == list(want), f"{where}: keys {list(got)} != {list(want)}"
+    for key, w in want.items():
+        g = got[key]
+        if isinstance(w, dict):
+            assert_same_infos(g, w, f"{where}/{key}")
+        elif w.dtype == object:
+            assert g.dtype == object and g.shape == w.shape, f"{where}/{key}"
+            for i, (a, b) in enumerate(zip(g, w, strict=True)):
+                assert same(image_of(a) if a is not None else a, image_of(b) if b is not None else b), (
+                    f"{where}/{key}[{i}]"
+                )
+        else:
+            assert (g.dtype, g.shape) == (w.dtype, w.shape), f"{where}/{key}: {g.dtype}{g.shape} != {w.dtype}{w.shape}"
+            np.testing.assert_array_equal(g, w, err_msg=f"{where}/{key}")
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_vector_infos_assembled_with_arrays_match_slot_by_slot_assembly(env_id: str, mode: AutoresetMode) -> None:
+    core_path, variant = ENV_IDS[env_id]
+    fast = gym.make_vec(env_id, num_envs=5, autoreset_mode=mode)
+    slow = SlotBySlotVectorEnv(core_path, num_envs=5, autoreset_mode=mode, **variant)
+    mask = np.array([True, False, True, True, False])
+    for seed, options in ((3, {}), (4, {"reset_mask": mask})):
+        got, want = fast.reset(seed=seed, options=options), slow.reset(seed=seed, options=options)
+        np.testing.assert_array_equal(image_of(got[0]), image_of(want[0]))
+        assert_same_infos(got[1], want[1], f"reset {seed}")
+    rng = np.random.default_rng(0)
+    finished = 0
+    for t in range(MAX_VECTOR_STEPS):
+        if finished >= 6:
+            break
+        actions = np.stack([np.asarray(random_action(fast.single_action_space, rng)) for _ in range(5)])
+        got, want = fast.step(actions), slow.step(actions)
+        np.testing.assert_array_equal(image_of(got[0]), image_of(want[0]))
+        assert got[1].tolist() == want[1].tolist() and got[2].tolist() == want[2].tolist()
+        assert_same_infos(got[4], want[4], f"step {t}")
+        finished += int(got[2].sum())
+    assert finished, "no episode ended: the final infos were not compared"
+
+
+@pytest.mark.parametrize("env_id", [env_id for env_id in ALL_IDS if make_core(env_id).has_ground_truth_info])
+def test_vector_face_assembles_step_infos_without_a_per_slot_call(env_id: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The endless ids' ground truth comes as one array per step (``step_infos``), not slot by slot."""
+    venv = gym.make_vec(env_id, num_envs=4)
+    venv.reset(seed=0)
+
+    def per_slot(k: int) -> dict:
+        raise AssertionError("the vector face asked for one slot's step info")
+
+    monkeypatch.setattr(venv.core, "step_info", per_slot)
+    rng = np.random.default_rng(1)
+    for _ in range(60):
+        actions = np.stack([np.asarray(random_action(venv.single_action_space, rng)) for _ in range(4)])
+        _, _, _, _, infos = venv.step(actions)
+        assert infos["ground_truth"].shape[0] == 4 and infos["_ground_truth"].all()
+    venv.reset(seed=1)

@@ -43,7 +43,7 @@ def up(code: int) -> pygame.event.Event:
 
 
 def test_every_console_script_is_declared() -> None:
-    scripts = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
+    scripts = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"]["scripts"]
     for name in SCRIPT_NAMES:
         assert scripts[name] == f"envs.play:{name}"
         assert callable(getattr(player, name))

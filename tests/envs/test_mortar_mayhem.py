@@ -17,7 +17,7 @@ from envs.mortar_mayhem import (
     walk_commands,
 )
 from envs.rng import BoundedDraws, seeded_generator
-from tests.batching import check_batched_equals_singles
+from tests.support.batching import check_batched_equals_singles
 
 MM, MM_GRID, MMB, MMB_GRID, EMM = (
     "MortarMayhem-v0",
@@ -127,8 +127,9 @@ def test_timeline_with_oracle(env_id: str, seed: int) -> None:
     assert all(s["reward"] == pytest.approx(0.1) for s in steps if s["reward"] != 0)
     assert len(steps) - 1 == length == checks[-1]
     final = steps[-1]["info"]
-    assert set(final) == {"reward", "length", "success", "commands_completed"}
+    assert set(final) == {"reward", "length", "success", "commands_completed", "checks_passed", "command_count"}
     assert final["length"] == length and final["success"] == 1 and final["commands_completed"] == 1.0
+    assert final["checks_passed"] == final["command_count"] == 10
     assert final["reward"] == pytest.approx(1.0)
     assert all(s["info"] == {} for s in steps[:-1])
     # the clue phase lasts t0 - 1 steps after the reset frame; the act phase starts at t0
@@ -146,7 +147,14 @@ def test_missing_the_first_check_ends_the_episode_there(env_id: str) -> None:
     env, core = make(env_id)
     steps = play(env, core, 3, policy=lambda c, t: oracle(c, miss=True))
     assert len(steps) - 1 == TIMELINE[env_id][1]
-    assert steps[-1]["info"] == {"reward": 0.0, "length": TIMELINE[env_id][1], "success": 0, "commands_completed": 0.0}
+    assert steps[-1]["info"] == {
+        "reward": 0.0,
+        "length": TIMELINE[env_id][1],
+        "success": 0,
+        "commands_completed": 0.0,
+        "checks_passed": 0,
+        "command_count": 10,
+    }
 
 
 @pytest.mark.parametrize("env_id", [MM, MMB_GRID])
@@ -170,6 +178,7 @@ def test_failed_last_check_counts_as_success(env_id: str) -> None:
     final = steps[-1]["info"]
     assert final["length"] == TIMELINE[env_id][3]
     assert final["success"] == 1 and final["commands_completed"] == 1.0
+    assert final["checks_passed"] == 9 and final["command_count"] == 10  # what the agent actually did
     # the failure reward is assigned last that step, so the episode bonus is lost
     assert steps[-1]["reward"] == -1.0 and final["reward"] == pytest.approx(0.9 - 1.0)
 
@@ -193,7 +202,51 @@ def test_lethal_phase_death_undercounts(env_id: str) -> None:
     assert third < final["length"] < third + lethal
     assert final["reward"] == pytest.approx(0.3) and final["success"] == 0
     assert final["commands_completed"] == pytest.approx(0.2)
+    assert final["checks_passed"] == 3 and final["command_count"] == 10  # what the agent actually did
     assert steps[-1]["reward"] == 0.0
+
+
+@pytest.mark.parametrize("env_id", FINITE)
+@pytest.mark.parametrize("count", [1, 3])
+def test_checks_passed_and_command_count(env_id: str, count: int) -> None:
+    """The added keys: the checks actually passed (last check failed / death in the lethal phase / all passed) and
+    the episode's command count, beside the reference's quirky ``success`` and ``commands_completed``."""
+    env, core = make(env_id)
+    options = {"command_count": [count]}
+    steps = play(env, core, 5, options)  # all checks passed
+    assert steps[-1]["info"]["checks_passed"] == steps[-1]["info"]["command_count"] == count
+    last = count - 1
+    steps = play(env, core, 5, options, policy=lambda c, t: oracle(c, miss=c.current[0] == last and not c.tiles_on[0]))
+    final = steps[-1]["info"]
+    assert (final["success"], final["commands_completed"]) == (1, 1.0)  # the reference's quirk, kept
+    assert (final["checks_passed"], final["command_count"]) == (last, count)
+    if count > 1:
+        final = play(env, core, 5, options, policy=leave_after_first_check)[-1]["info"]
+        assert final["commands_completed"] == 0.0 and final["success"] == 0  # the reference undercounts
+        assert final["reward"] == pytest.approx(0.1)
+        assert (final["checks_passed"], final["command_count"]) == (1, count)
+
+
+def leave_after_first_check(c: MortarMayhemCore, t: int):
+    """Pass the first check, then leave the tile while the other tiles are lethal."""
+    if c.current[0] == 0 and c.timer[0] == 0 and not c.tiles_on[0] and c.clue_left[0] == 0:  # the first check
+        return inward_turn(c) if c.grid else oracle(c)  # (turning keeps the tile)
+    if c.current[0] >= 1:
+        return 3 if c.grid else oracle(c, miss=True)
+    return oracle(c)
+
+
+def test_endless_checks_passed_after_a_death_in_the_lethal_phase() -> None:
+    env, core = make(EMM)
+    final = play(env, core, 1, policy=lambda c, t: oracle(c, miss=t > 22))[-1]["info"]  # pass the check at 22
+    assert final["length"] < 22 + 6 + 4 and final["reward"] == pytest.approx(0.1)
+    assert final["checks_passed"] == final["commands_completed"] == 1
+    assert "command_count" not in final
+
+
+def test_added_info_keys_are_declared_for_the_parity_tools() -> None:
+    assert MortarMayhemCore.added_info_keys == {"checks_passed", "command_count"}
+    assert envs.make_core("MysteryPath-v0").added_info_keys == frozenset()
 
 
 @pytest.mark.parametrize("env_id", [MM, MMB_GRID])
@@ -248,8 +301,15 @@ def test_endless_round_timing() -> None:
             assert tile_colours(steps[t], core)[0] == {RED}, t
     final = steps[-1]["info"]
     assert len(steps) - 1 == 200 and steps[-1]["terminated"]
-    assert set(final) == {"ground_truth", "reward", "length", "commands_completed", "max_command_sequence"}
-    assert final["commands_completed"] == 7 and final["max_command_sequence"] == 3
+    assert set(final) == {
+        "ground_truth",
+        "reward",
+        "length",
+        "commands_completed",
+        "max_command_sequence",
+        "checks_passed",
+    }
+    assert final["commands_completed"] == final["checks_passed"] == 7 and final["max_command_sequence"] == 3
     assert final["reward"] == pytest.approx(0.7)
 
 
@@ -280,7 +340,7 @@ def test_endless_max_command_sequence_quirk(fail_after: int, length: int, max_se
         env, core, 1, policy=lambda c, t: oracle(c, miss=c.completed_total[0] == fail_after and not c.tiles_on[0])
     )
     final = steps[-1]["info"]
-    assert final["length"] == length and final["commands_completed"] == fail_after
+    assert final["length"] == length and final["commands_completed"] == final["checks_passed"] == fail_after
     assert final["max_command_sequence"] == max_sequence
 
 

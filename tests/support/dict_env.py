@@ -10,7 +10,7 @@ import numpy as np
 from envs.core import BatchedCore, Index
 
 ENV_ID = "TestDict-v0"
-CORE = "tests.dict_env:DictCore"
+CORE = "tests.support.dict_env:DictCore"
 
 
 class DictCore(BatchedCore):

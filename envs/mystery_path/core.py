@@ -1,265 +1,69 @@
-"""The Mystery Path family: ``MysteryPath-v0``, ``MysteryPath-Grid-v0`` and ``Endless-MysteryPath-v0``.
-
-An invisible path of 12-px tiles leads across the screen. Stepping off it shows a red cross for one step, then the
-agent is put back on the path's first tile (the action of that step is ignored). Each path tile pays
-``reward_path_progress`` on its first visit.
-
-* ``MysteryPath-v0`` / ``-Grid-v0`` (``endless=False``): one 7x7 level (:mod:`envs.mystery_path_generator`) from an
-  origin on one border to a goal on the opposite one. Reaching the goal pays ``reward_goal`` and ends the episode;
-  ``max_steps`` ends it too. The free variant moves 3 px per step (MultiDiscrete([3, 3])), the grid variant turns and
-  steps one tile (Discrete(4)). The agent sees only itself (and, optionally, the origin and goal tiles).
-* ``Endless-MysteryPath-v0`` (``endless=True``): 7x7 segments joined left to right by a transition tile, generated
-  ahead of the agent. The camera follows the agent, which sees the path behind it but never ahead. Actions are
-  Discrete(4): 0 none, 1 right, 2 up, 3 down. The episode ends after ``stamina_level`` steps without reaching a fresh
-  tile, when the agent falls off behind its best column, or when it falls off twice at the same tile.
-
-State lives in arrays with a leading slot axis, and the rules read per-episode tables built at reset (rewards by
-tile kind, velocities by action, grid moves by state). Many slots are stepped with array operations; one or two
-slots (the single-environment face) with the same rules one slot at a time, because a numpy call costs microseconds
-whatever its size (tests keep both ways identical). Frames are drawn into a padded canvas (sprites near the edges
-need no clipping): the static Mystery Path background is copied and the sprites are scattered in with one fancy
-assignment per sprite kind; the scrolling Endless view is built band by band (every tile row of the screen consists
-of one "edge" pixel row pattern and one "middle" pattern). Endless segments are generated from the reference's
-random stream in the reference's order, but only when first needed (see ``MysteryPathCore._enter_segment``).
-"""
+"""The Mystery Path core: state of arrays, reset, step and drawing of every slot (see the package docstring)."""
 
 from __future__ import annotations
 
-from functools import cache
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from envs.core import BatchedCore, Index
-from envs.drawing import SCREEN, Sprite, SpriteScatter, agent_sprites, blend, pygame, round_half_away, surface_to_sprite
-from envs.movement import continuous_heading, continuous_velocity, grid_step
-from envs.mystery_path_generator import draw_path, generate_path
-from envs.options import Option
+from envs.drawing import SCREEN, SpriteScatter, agent_sprites, blend, round_half_away
+from envs.mystery_path.canvas import Canvas, fall_off_cross
+from envs.mystery_path.endless import (
+    BACKGROUND_EDGE,
+    BACKGROUND_MIDDLE,
+    BAND_PAD,
+    BAND_WIDTH,
+    BLACK_FLOOR,
+    DEBUG_PATH_ALPHA,
+    DIRECTIONS,
+    EAST,
+    INITIAL_SEGMENTS,
+    NEW_TILE,
+    PATH_TILE,
+    REFILL,
+    SEGMENT_COLUMNS,
+    STAMINA_BAR_WIDTH,
+    STAMINA_BARS,
+    STEP_DIRECTIONS,
+    TILE_BYTE_OFFSETS,
+    TILE_EDGE_BYTES,
+    TILE_MIDDLE_BYTES,
+    WEST,
+    ice_background,
+    walk_start,
+)
+from envs.mystery_path.generator import draw_path, generate_path
+from envs.mystery_path.level import (
+    AFTER_VISIT,
+    ENDLESS_ACTIONS,
+    ENDLESS_HEADINGS,
+    FREE_ACTIONS,
+    FREE_HEADINGS,
+    GOAL,
+    GOAL_COLOUR,
+    GRID,
+    GRID_AGENT_SCALE,
+    GRID_NEXT,
+    NEW,
+    OFF,
+    ORIGIN_COLOUR,
+    PATH,
+    PATH_COLOUR,
+    TILE,
+    TILE_CENTRES,
+    TILE_OF_PIXEL,
+    WALL_COLOUR,
+    fill_tile,
+    velocities,
+)
+from envs.mystery_path.options import option_specs
 from envs.rng import BoundedDraws
 
-GRID = 7  # tiles per side of a level (and of an endless segment)
-TILE = SCREEN // GRID  # 12 px
-SEGMENT_COLUMNS = GRID + 1  # an endless segment plus its transition tile
-INITIAL_SEGMENTS = 3
 SCALAR_SLOTS = 2  # up to this many slots per step are stepped one by one (see MysteryPathCore._step)
-GRID_AGENT_SCALE = 0.25  # the grid variant ignores agent_scale
-
-ORIGIN_COLOUR = (0, 0, 255)
-GOAL_COLOUR = (0, 255, 0)
-PATH_COLOUR = (255, 255, 255)
-WALL_COLOUR = (255, 0, 0)
-CROSS_COLOUR = (255, 0, 0)
-TILE_BORDER = (210, 210, 210)
-ICE_COLOUR = (125, 177, 250)
-DEBUG_PATH_ALPHA = 200
-STAMINA_BAR_WIDTH = 4
-STAMINA_GREEN, STAMINA_RED = (0, 255, 0), (255, 0, 0)
-
-# Free movement: an action pair (horizontal, vertical) is coded as 3 * horizontal + vertical. Endless actions are
-# 0 none, 1 right, 2 up, 3 down. Heading -1 means "unchanged".
-FREE_ACTIONS = np.array([(h, v) for h in range(3) for v in range(3)], dtype=np.int64)
-ENDLESS_ACTIONS = np.array([[0, 0], [2, 0], [0, 1], [0, 2]], dtype=np.int64)
-FREE_HEADINGS = continuous_heading(FREE_ACTIONS, np.full(len(FREE_ACTIONS), -1))
-ENDLESS_HEADINGS = continuous_heading(ENDLESS_ACTIONS, np.full(len(ENDLESS_ACTIONS), -1))
 
 
-def _grid_transitions() -> np.ndarray:
-    """Grid movement as a table: state ``4 * tile + heading // 90`` and action -> next state (tile = 7 * x + y)."""
-    state = np.arange(GRID * GRID * 4)
-    tile, quarter = state // 4, state % 4
-    table = np.empty((len(state), 4), dtype=np.int64)
-    for action in range(4):
-        x, y, heading = grid_step(np.full(len(state), action), tile // GRID, tile % GRID, quarter * 90, GRID)
-        table[:, action] = (x * GRID + y) * 4 + heading // 90
-    return table
-
-
-GRID_NEXT = _grid_transitions()
-TILE_OF_PIXEL = (np.arange(SCREEN)[:, None] // TILE) * GRID + np.arange(SCREEN)[None, :] // TILE  # [x, y] -> tile
-TILE_CENTRES = np.array([(x * TILE + TILE // 2, y * TILE + TILE // 2) for x in range(GRID) for y in range(GRID)])
-
-# What a Mystery Path tile is for the agent; a visited NEW tile becomes PATH.
-OFF, PATH, NEW, GOAL = 0, 1, 2, 3
-AFTER_VISIT = np.array([OFF, PATH, PATH, GOAL], dtype=np.int64)
-# Endless path tiles: flags for "pays progress on the next visit" and "refills stamina on the next visit".
-NEW_TILE, REFILL = 1, 2
-
-# Endless ground truth: the direction from the current tile to the next path tile.
-DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.int64)  # east, north, south
-EAST, NORTH, SOUTH, WEST = 0, 1, 2, -1
-STEP_DIRECTIONS = {GRID: EAST, -1: NORTH, 1: SOUTH, -GRID: WEST}  # by the step between tile indices 7 * x + y
-
-# The endless floor is drawn band by band: a band is one tile row of the screen, and all its pixel rows equal either
-# its "edge" row (first and last row of a tile) or its "middle" row. Bands are padded by one tile on both sides so
-# that tiles need no clipping.
-BAND_PAD = TILE
-BAND_WIDTH = SCREEN + 2 * BAND_PAD
-TILE_EDGE_BYTES = np.tile(np.array(TILE_BORDER, dtype=np.uint8), TILE)
-TILE_MIDDLE_BYTES = np.concatenate([TILE_BORDER, np.tile(PATH_COLOUR, TILE - 2), TILE_BORDER]).astype(np.uint8)
-TILE_BYTE_OFFSETS = np.arange(TILE * 3)
-PATH_TILE = np.empty((TILE, TILE, 3), dtype=np.uint8)  # a past-path tile: white with a grey 1-px border
-PATH_TILE[:] = TILE_BORDER
-PATH_TILE[1:-1, 1:-1] = PATH_COLOUR
-BLACK_FLOOR = TILE  # row of the background band tables below
-
-
-def _background_bands() -> tuple[np.ndarray, np.ndarray]:
-    """Edge and middle rows of the endless background: rows 0..11 ice scrolled by that many px, row 12 black."""
-    edge = np.zeros((TILE + 1, SCREEN, 3), dtype=np.uint8)
-    middle = np.zeros((TILE + 1, SCREEN, 3), dtype=np.uint8)
-    for phase in range(TILE):
-        local = (np.arange(SCREEN) + phase) % TILE
-        border = (local == 0) | (local == TILE - 1)
-        edge[phase] = TILE_BORDER
-        middle[phase] = np.where(border[:, None], TILE_BORDER, ICE_COLOUR)
-    return edge, middle
-
-
-BACKGROUND_EDGE, BACKGROUND_MIDDLE = _background_bands()
-
-
-def _stamina_bars() -> np.ndarray:
-    """The stamina bar for every red height 0..84: (85, 84, 4, 3)."""
-    bars = np.empty((SCREEN + 1, SCREEN, STAMINA_BAR_WIDTH, 3), dtype=np.uint8)
-    bars[:] = STAMINA_GREEN
-    for height in range(SCREEN + 1):
-        bars[height, :height] = STAMINA_RED
-    return bars
-
-
-STAMINA_BARS = _stamina_bars()
-
-
-def option_specs(grid: bool, endless: bool) -> dict[str, Option]:
-    """The reference's reset parameters of one variant, with their defaults and valid ranges."""
-    scale = Option(0.25, "float", 0.05, 1.0, doc="agent size (body radius int(25 * scale))")
-    if grid:
-        scale = Option(0.25, "float", 0.05, 1.0, doc="accepted but unused: the grid agent always has scale 0.25")
-    speed = Option(3.0, "float", 0.0, None, doc="pixels per step (cut to an int per axis)")
-    if endless:
-        return {
-            "max_steps": Option(-1, "int", doc="the episode ends when t == max_steps (<= 0: never)"),
-            "agent_scale": scale,
-            "agent_speed": speed,
-            "show_origin": Option(False, "bool", doc="has no effect (as in memory-gym)"),
-            "show_past_path": Option(True, "bool", doc="draw the path tiles behind the agent"),
-            "show_background": Option(False, "bool", doc="scrolling ice tiles instead of black"),
-            "show_stamina": Option(False, "bool", doc="stamina bar at the right edge"),
-            "visual_feedback": Option(True, "bool", doc="red cross on the agent when it falls off"),
-            "camera_offset_scale": Option(5.0, "float", 0.0, 5.5, doc="tiles visible behind the agent"),
-            "stamina_level": Option(20, "int", 1, None, doc="steps allowed without reaching a fresh tile"),
-            "reward_fall_off": Option(0.0, "float"),
-            "reward_path_progress": Option(0.1, "float", doc="first visit of each path tile"),
-            "reward_step": Option(0.0, "float"),
-        }
-    specs = {
-        "max_steps": Option(128 if grid else 512, "int", doc="the episode ends when t == max_steps"),
-        "agent_scale": scale,
-        "agent_speed": speed,
-        "cardinal_origin_choice": Option(
-            [0, 1, 2, 3], "int_list", 0, 3, doc="origin side, sampled: 0 left, 1 right, 2 top, 3 bottom"
-        ),
-        "show_origin": Option(False, "bool", doc="draw the origin tile (blue)"),
-        "show_goal": Option(False, "bool", doc="draw the goal tile (green)"),
-        "visual_feedback": Option(True, "bool", doc="red cross on the agent while it is off the path"),
-        "reward_goal": Option(1.0, "float"),
-        "reward_fall_off": Option(0.0, "float"),
-        "reward_path_progress": Option(0.0 if grid else 0.1, "float", doc="first visit of each inner path tile"),
-        "reward_step": Option(0.0, "float"),
-    }
-    if grid:
-        del specs["agent_speed"]
-    return specs
-
-
-# ------------------------------------------------------------------------------------------------------- sprites
-@cache
-def fall_off_cross() -> Sprite:
-    """The red 10x10 cross (two 3-px diagonals) shown where the agent fell off."""
-    size, width = int(40 * 0.25), int(12 * 0.25)
-    surface = pygame.Surface((size, size))
-    surface.fill((0, 0, 0))
-    pygame.draw.line(surface, CROSS_COLOUR, (0, 0), (size - 1, size - 1), width)
-    pygame.draw.line(surface, CROSS_COLOUR, (size - 1, 0), (0, size - 1), width)
-    return surface_to_sprite(surface, (0, 0, 0))
-
-
-@cache
-def _ice_background(phase: int) -> np.ndarray:
-    """The endless view's ice floor scrolled by ``phase`` px (0..11) to the left, as a whole picture."""
-    band = np.empty((TILE, SCREEN, 3), dtype=np.uint8)
-    band[:] = BACKGROUND_MIDDLE[phase]
-    band[0] = band[TILE - 1] = BACKGROUND_EDGE[phase]
-    return np.tile(band, (GRID, 1, 1))
-
-
-# -------------------------------------------------------------------------------------------------- canvas
-class _Canvas:
-    """The frames of all slots, with spare rows above and below each so that sprites can be scattered without
-    clipping them vertically. Rows are not padded, so that each frame is one contiguous block (copying and filling
-    frames is then about twice as fast); the rare sprite with opaque pixels left or right of the screen is pasted
-    on its own, clipped."""
-
-    def __init__(self, num_envs: int) -> None:
-        self.num_envs = num_envs
-        self._columns: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # see _opaque_columns
-        self._allocate(0)
-
-    def _allocate(self, margin: int) -> None:
-        self.margin = margin
-        self.buffer = np.zeros((self.num_envs, SCREEN + 2 * margin, SCREEN, 3), dtype=np.uint8)
-        self.view = self.buffer[:, margin : margin + SCREEN]
-        # The same pixels split into tile bands: (slot, band, row in band, column, channel).
-        self.bands = self.view.reshape(self.num_envs, GRID, TILE, SCREEN, 3)
-        assert np.shares_memory(self.bands, self.buffer)
-
-    def fit(self, sprites: SpriteScatter) -> None:
-        """Grow the margin (keeping the frames) until every sprite of ``sprites`` fits into it."""
-        if sprites.max_side > self.margin:
-            frames = self.view.copy()
-            self._allocate(sprites.max_side)
-            self.view[:] = frames
-
-    def _opaque_columns(self, sprites: SpriteScatter) -> tuple[np.ndarray, np.ndarray]:
-        """First and last opaque column of every sprite of ``sprites`` (kept until sprites are added)."""
-        known = self._columns.get(id(sprites))
-        if known is None or known[0] != len(sprites.sprites):
-            columns = [np.flatnonzero(sprite.mask.any(axis=0)) for sprite in sprites.sprites]
-            first = np.array([c[0] for c in columns], dtype=np.int64)
-            last = np.array([c[-1] for c in columns], dtype=np.int64)
-            known = self._columns[id(sprites)] = (len(sprites.sprites), first, last)
-        return known[1], known[2]
-
-    def paste(
-        self,
-        sprites: SpriteScatter,
-        slots: np.ndarray,
-        ids: np.ndarray,
-        top: np.ndarray,
-        left: np.ndarray,
-        may_leave_screen: bool = False,
-    ) -> None:
-        """Paste sprite ``ids[i]`` into slot ``slots[i]`` with its top-left at screen pixel (top[i], left[i]).
-
-        Sprites at least partly on the screen need no vertical clipping (the margin is as high as the largest
-        sprite); ``may_leave_screen`` moves sprites that are entirely above or below the screen into the margin.
-        """
-        first, last = self._opaque_columns(sprites)
-        inside = (left + first[ids] >= 0) & (left + last[ids] < SCREEN)
-        scattered = top
-        if may_leave_screen:
-            m = self.margin
-            scattered = np.minimum(np.maximum(top, -m), SCREEN + m - sprites.heights[ids])
-        if inside.all():
-            sprites.paste(self.buffer, slots, ids, scattered + self.margin, left)
-            return
-        sprites.paste(self.buffer, slots[inside], ids[inside], scattered[inside] + self.margin, left[inside])
-        for i in np.flatnonzero(~inside).tolist():  # opaque pixels left or right of the screen: clipped
-            sprites.sprites[ids[i]].paste(self.view[slots[i]], int(top[i]), int(left[i]))
-
-
-# ---------------------------------------------------------------------------------------------------- core
 class MysteryPathCore(BatchedCore):
     """All three Mystery Path variants: ``grid`` selects grid movement, ``endless`` the side-scrolling endless path."""
 
@@ -299,7 +103,7 @@ class MysteryPathCore(BatchedCore):
         self.cross_id = self.crosses.add((fall_off_cross(),))
         self.sprite0 = np.zeros(n, dtype=np.int64)  # sprite id of heading 0 at the slot's agent scale
         self.half = np.zeros(n, dtype=np.int64)  # sprite side // 2: top-left = centre - half
-        self.canvas = _Canvas(n)
+        self.canvas = Canvas(n)
         self.canvas.fit(self.crosses)
         if endless:
             self._init_endless(n)
@@ -363,7 +167,7 @@ class MysteryPathCore(BatchedCore):
         self.sprite0[at] = first
         self.half[at] = self.agents.sprites[first].width // 2
         if not self.grid:
-            self.velocity[at] = _velocities(self.endless, float(opts["agent_speed"]))
+            self.velocity[at] = velocities(self.endless, float(opts["agent_speed"]))
         self.t[at] = 0
         self.max_steps[at] = opts["max_steps"]
         self.num_fails[at] = 0
@@ -415,9 +219,9 @@ class MysteryPathCore(BatchedCore):
         background = self.background[k]
         background[:] = 0
         if opts["show_origin"]:
-            _fill_tile(background, origin, ORIGIN_COLOUR)
+            fill_tile(background, origin, ORIGIN_COLOUR)
         if opts["show_goal"]:
-            _fill_tile(background, goal, GOAL_COLOUR)
+            fill_tile(background, goal, GOAL_COLOUR)
 
     def _reset_endless(
         self, slots: list[int], at: int | np.ndarray, rngs: list[np.random.Generator], opts: dict[str, Any], radius: int
@@ -445,8 +249,12 @@ class MysteryPathCore(BatchedCore):
         # minus the camera offset.
         self.agent_screen_left[at] = int(radius - self.half[slots[0]] - camera_offset)
         for k, rng in zip(slots, rngs, strict=True):
-            if self.segment_rng[k] is rng:  # the generator continues: first make the last episode's remaining draws
-                self._catch_up(k)
+            # One block of draws for the level (a few dozen words), and before it, if the generator continues, the
+            # draws of the segments that the reference built in the last episode and this slot did not.
+            draws = BoundedDraws(rng)
+            draws.read_ahead()
+            if self.segment_rng[k] is rng:
+                self._skip_segments(k, draws)
             self.segment_rng[k] = rng
             self.reference_segments[k] = INITIAL_SEGMENTS
             self.chain_lists[k] = ([], [])
@@ -454,7 +262,8 @@ class MysteryPathCore(BatchedCore):
             self.num_segments[k] = 0
             self.walks_until[k] = 0
             self.tile_node[k] = -1
-            self._add_segment(k, rng)
+            self._add_segment(k, draws)
+            draws.close()
             self._enter_segment(k, 0)
             self.flags[k, 0] = REFILL  # the very first tile pays nothing
             self.ground_truth[k] = self.direction[k, 0]  # never west: the first tile is in column 0
@@ -479,15 +288,13 @@ class MysteryPathCore(BatchedCore):
         else:
             self.canvas.view[k] = frame
 
-    def _add_segment(self, k: int, rng: np.random.Generator) -> None:
-        """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile."""
+    def _add_segment(self, k: int, draws: BoundedDraws) -> None:
+        """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile, drawn from
+        ``draws`` (which the caller closes)."""
         segment = int(self.num_segments[k])
-        draws = BoundedDraws(rng)
-        draws.read_ahead()  # the level needs a few dozen words: fetch them before the first draw
         start_y = draws.below(GRID) if segment == 0 else int(self.last_goal_y[k])
         goal_y = draws.below(GRID)
         path, _ = draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
-        draws.close()
         shift = segment * SEGMENT_COLUMNS
         xs, ys = self.chain_lists[k]
         begin = len(xs)
@@ -518,7 +325,7 @@ class MysteryPathCore(BatchedCore):
         the first is built at reset; entering the second builds every segment that the reference has built by then,
         in the same order from the same generator, so levels and random streams are the same. An episode that never
         leaves the first segment (most short ones) then costs one level instead of three, unless the next reset
-        continues the generator: then :meth:`_catch_up` makes the missing draws first.
+        continues the generator: then :meth:`_skip_segments` makes the missing draws first.
         """
         while segment > self.reference_segments[k] - 2:
             self.reference_segments[k] += 1
@@ -528,7 +335,7 @@ class MysteryPathCore(BatchedCore):
         if end > begin:
             if self.show_past_path[k]:
                 xs, depth = self.chain_lists[k][0], int(self.depth[k])
-                self.walk_start[k, begin:end] = [_walk_start(xs, i, xs[i] - 1, depth) for i in range(begin, end)]
+                self.walk_start[k, begin:end] = [walk_start(xs, i, xs[i] - 1, depth) for i in range(begin, end)]
             else:
                 self.walk_start[k, begin:end] = range(begin, end)
             self.walks_until[k] = end
@@ -536,8 +343,21 @@ class MysteryPathCore(BatchedCore):
 
     def _catch_up(self, k: int) -> None:
         """Build the segments that the reference has built by now but this slot has not yet (see _enter_segment)."""
-        while self.num_segments[k] < self.reference_segments[k]:
-            self._add_segment(k, self.segment_rng[k])
+        if self.num_segments[k] < self.reference_segments[k]:
+            draws = BoundedDraws(self.segment_rng[k])
+            draws.read_ahead()
+            while self.num_segments[k] < self.reference_segments[k]:
+                self._add_segment(k, draws)
+            draws.close()
+
+    def _skip_segments(self, k: int, draws: BoundedDraws) -> None:
+        """Make the draws of the segments that the reference has built by now but this slot has not, without
+        building them: at a reset that continues the generator, the finished episode's segments are never seen."""
+        goal_y = int(self.last_goal_y[k])
+        for segment in range(int(self.num_segments[k]), int(self.reference_segments[k])):
+            start_y = draws.below(GRID) if segment == 0 else goal_y
+            goal_y = draws.below(GRID)
+            draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
 
     def path_tiles(self, k: int) -> tuple[list[int], list[int]]:
         """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""
@@ -675,7 +495,7 @@ class MysteryPathCore(BatchedCore):
             seen.add(tile)
         self.flags[k, : len(self.chain_lists[k][0])] |= REFILL
         if self.show_past_path[k]:
-            self.draw_from[k] = _walk_start(self.chain_lists[k][0], node, column - 1, int(self.depth[k]))
+            self.draw_from[k] = walk_start(self.chain_lists[k][0], node, column - 1, int(self.depth[k]))
         else:
             self.draw_from[k] = node
         return ends
@@ -793,7 +613,7 @@ class MysteryPathCore(BatchedCore):
     def _draw_floor_slot(self, k: int, frame: np.ndarray) -> None:
         """The endless floor of slot ``k``: black or ice, then the path tiles behind the agent."""
         if self.show_background[k]:
-            frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
+            frame[:] = ice_background(int(-self.bg_scroll[k]) % TILE)
         else:
             frame[:] = 0
         first, stop = int(self.draw_from[k]), int(self.current_node[k])
@@ -905,13 +725,18 @@ class MysteryPathCore(BatchedCore):
             return {"ground_truth": DIRECTIONS[self.ground_truth[k]].copy()}
         return {}
 
+    def _step_infos(self) -> dict[str, np.ndarray]:
+        if self.endless:
+            return {"ground_truth": DIRECTIONS[self.ground_truth]}
+        return {}
+
     def _debug_frame(self, k: int) -> np.ndarray:
         """Ground truth: the whole level (path white, origin blue, goal green, walls red) or, in the endless
         variant, every generated path tile at alpha 200 and the stamina bar; plus the agent and the cross."""
         frame = np.zeros((SCREEN, SCREEN, 3), dtype=np.uint8)
         if self.endless:
             if self.show_background[k]:
-                frame[:] = _ice_background(int(-self.bg_scroll[k]) % TILE)
+                frame[:] = ice_background(int(-self.bg_scroll[k]) % TILE)
             shift = int(-self.camera_x[k])  # the whole path picture is placed once, so it is truncated once
             xs, ys = self.path_tiles(k)
             for tx, ty in zip(xs, ys, strict=True):
@@ -923,11 +748,11 @@ class MysteryPathCore(BatchedCore):
         else:
             origin, goal, layout = self.levels[k]
             for tile in layout.path[1:-1]:
-                _fill_tile(frame, tile, PATH_COLOUR)
-            _fill_tile(frame, origin, ORIGIN_COLOUR)
-            _fill_tile(frame, goal, GOAL_COLOUR)
+                fill_tile(frame, tile, PATH_COLOUR)
+            fill_tile(frame, origin, ORIGIN_COLOUR)
+            fill_tile(frame, goal, GOAL_COLOUR)
             for tile in layout.walls:
-                _fill_tile(frame, tile, WALL_COLOUR)
+                fill_tile(frame, tile, WALL_COLOUR)
             left = int(self.pos[k, 0] - self.half[k])
         self._paste_agent_slot(k, frame, left)
         if self.cross_visible[k]:
@@ -935,32 +760,3 @@ class MysteryPathCore(BatchedCore):
         if self.endless:
             frame[:, SCREEN - STAMINA_BAR_WIDTH :] = STAMINA_BARS[self._stamina_bar_heights(k)]
         return frame
-
-
-@cache
-def _velocities(endless: bool, speed: float) -> np.ndarray:
-    """(vx, vy) of each action code of the free controller at ``speed`` px per step."""
-    actions = ENDLESS_ACTIONS if endless else FREE_ACTIONS
-    vx, vy = continuous_velocity(actions, np.full(len(actions), speed))
-    return np.stack([vx, vy], axis=1).astype(np.int64)
-
-
-def _walk_start(xs: list[int], node: int, column: int, depth: int) -> int:
-    """First chain tile of the past path drawn behind an agent in ``column + 1`` whose last path tile is ``node``
-    (``xs``: the chain's columns; ``depth``: columns drawn behind the agent's column).
-
-    The walk goes back from the tile before ``node`` and stops after the first tile whose column is at most
-    ``max(0, column - depth)``, or at the first tile of the path. Nothing is drawn when ``column < 0``.
-    """
-    if column < 0:
-        return node
-    last = max(0, column - depth)
-    i = node - 1
-    while i > 0 and xs[i] > last:
-        i -= 1
-    return max(i, 0)
-
-
-def _fill_tile(frame: np.ndarray, tile: tuple[int, int], colour: tuple[int, int, int]) -> None:
-    x, y = tile
-    frame[y * TILE : (y + 1) * TILE, x * TILE : (x + 1) * TILE] = colour

@@ -45,6 +45,20 @@ WALL_PERCENT = 33  # an inner tile is a wall when integers(0, 100) < 33
 BORDER_WALL_COUNTS = (4, 8)
 COST_LOW, COST_HIGH = 1, 9  # step costs: integers(1, 9), i.e. 1..8
 
+_WORD = 1 << 32
+WALL_WORDS = -(-WALL_PERCENT * _WORD // 100)  # integers(0, 100) < 33 for exactly the words below this
+
+
+@cache
+def rejected_words(high: int) -> frozenset[int]:
+    """The 32-bit words that numpy's ``integers(0, high)`` rejects (a redraw follows): ``word * high mod 2**32``
+    below ``2**32 % high``. (For 100: 96 words of the 2**32.)"""
+    threshold = _WORD % high
+    g = math.gcd(high, _WORD)
+    modulus = _WORD // g
+    inverse = pow(high // g, -1, modulus)
+    return frozenset((r // g * inverse) % modulus + j * modulus for r in range(0, threshold, g) for j in range(g))
+
 
 @dataclass(frozen=True)
 class MysteryPathLayout:
@@ -112,6 +126,56 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
     return MysteryPathLayout(path=tuple(tiles[t] for t in path), walls=tuple(tiles[t] for t in walls))
 
 
+def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[int]:
+    """Stages 1 and 2 of :func:`draw_path`: the inner walls, then the border walls, in the order they were made.
+
+    The draws are read straight from the words of ``draws``: ``integers(0, n)`` is ``word * n >> 32`` (numpy's
+    Lemire method, see :mod:`envs.rng`) unless the word is one that numpy rejects and draws again after; then
+    ``draws`` decides. ``integers(0, 100) < 33`` is ``word < WALL_WORDS``.
+    """
+    # 1. Inner walls (a bit mask, and a list in the order they were made): one draw per tile, read from the words
+    # unless one of them would be redrawn (once in millions of levels).
+    inner = grid.inner
+    words = draws.words
+    if draws.used + len(inner) + 9 > len(words):  # the inner walls' words, the count's and the picks'
+        draws.read_ahead()
+    used = draws.used
+    chunk = words[used : used + len(inner)]
+    if rejected_words(100).isdisjoint(chunk):
+        walls = [tile for tile, word in zip(inner, chunk, strict=True) if word < WALL_WORDS]
+        used += len(inner)
+    else:
+        draws.used = used
+        drawn = draws.below_many(100, len(inner))
+        walls = [tile for tile, draw in zip(inner, drawn, strict=True) if draw < WALL_PERCENT]
+        used = draws.used
+    wall_bits = sum(1 << tile for tile in walls)
+
+    # 2. Border walls: 4 or 8 picks among the candidates, while there are any (a single one is taken without a draw).
+    surrounding = grid.surrounding
+    candidates = [t for t in grid.border_candidates(start, end) if not surrounding[t] & wall_bits]
+    if used + 9 > len(words):
+        draws.used = used
+        draws.read_ahead()
+    count = BORDER_WALL_COUNTS[words[used] * len(BORDER_WALL_COUNTS) >> 32]  # (a range of 2 never redraws)
+    used += 1
+    for _ in range(min(count, len(candidates))):
+        choices = len(candidates)
+        index = 0
+        if choices > 1:
+            product = words[used] * choices
+            used += 1
+            if product & (_WORD - 1) < _WORD % choices:  # numpy draws again
+                draws.used = used - 1
+                index = draws.below(choices)
+                used = draws.used
+            else:
+                index = product >> 32
+        walls.append(candidates.pop(index))
+    draws.used = used
+    return walls
+
+
 def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: Tile) -> tuple[list[int], list[int]]:
     """:func:`generate_path` on tile indices ``x * height + y``: (path origin first, walls), drawn from ``draws``.
 
@@ -122,18 +186,7 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
     end = int(goal[0]) * grid.height + int(goal[1])
     n = grid.width * grid.height
 
-    # 1. Inner walls (a bit mask, and a list in the order they were made).
-    inner = grid.inner
-    walls = [tile for tile, draw in zip(inner, draws.below_many(100, len(inner)), strict=True) if draw < WALL_PERCENT]
-    wall_bits = sum(1 << tile for tile in walls)
-
-    # 2. Border walls.
-    surrounding = grid.surrounding
-    candidates = [t for t in grid.border_candidates(start, end) if not surrounding[t] & wall_bits]
-    for _ in range(BORDER_WALL_COUNTS[draws.below(len(BORDER_WALL_COUNTS))]):
-        if candidates:
-            tile = candidates.pop(draws.below(len(candidates)))
-            walls.append(tile)
+    walls = draw_walls(draws, grid, start, end)
 
     # 3. Randomised best-first search. Tile states: 0 not seen, 1 open, 2 closed or wall. The open list is kept as
     # two parallel lists (tiles and their f) so that the scan for the next tile reads f directly.

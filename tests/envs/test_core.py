@@ -174,3 +174,71 @@ def test_human_render_opens_a_dummy_window(monkeypatch: pytest.MonkeyPatch) -> N
     env.step(0)
     assert env.unwrapped._window is not None
     env.close()
+
+
+@pytest.mark.parametrize("env_id", ["ProofOfMemory-v0", "SearingSpotlights-v0", "MortarMayhem-Grid-v0"])
+def test_step_without_an_episode_asks_for_a_reset_and_a_valid_reset_then_works(env_id: str) -> None:
+    from gymnasium.error import ResetNeeded
+
+    action = 0 if env_id != "SearingSpotlights-v0" else [0, 0]
+    env = gym.make(env_id)  # with gymnasium's default wrappers
+    with pytest.raises(ResetNeeded, match="reset"):
+        env.step(action)
+    with pytest.raises(ValueError, match="unknown option 'bogus'"):
+        env.reset(seed=0, options={"bogus": 1})
+    for _ in range(2):  # every step, not only the first, asks for a reset
+        with pytest.raises(ResetNeeded, match="slot 0 .* no episode to step .*call reset first"):
+            env.step(action)
+    obs, _ = env.reset(seed=0)
+    twin = gym.make(env_id, disable_env_checker=True)
+    assert np.array_equal(obs, twin.reset(seed=0)[0])
+    for _ in range(10):
+        got, want = env.step(action), twin.step(action)
+        assert np.array_equal(got[0], want[0]) and got[1:4] == want[1:4]
+
+    # a reset that fails later (here: on its options) leaves no episode to continue either
+    with pytest.raises(ValueError, match="unknown option"):
+        env.reset(seed=1, options={"bogus": 1})
+    with pytest.raises(ResetNeeded, match="call reset first"):
+        env.step(action)
+    env.reset(seed=1)
+    env.step(action)
+
+    # the raw face and the native vector face
+    raw = envs.MemoryGymEnv(envs.ENV_IDS[env_id][0], **envs.ENV_IDS[env_id][1])
+    with pytest.raises(ResetNeeded, match="slot 0 .*call reset first"):
+        raw.step(action)
+    venv = gym.make_vec(env_id, num_envs=3)
+    actions = np.stack([np.asarray(action)] * 3)
+    with pytest.raises(ResetNeeded, match="slots 0, 1, 2 .*call reset first"):
+        venv.step(actions)
+    with pytest.raises(ValueError, match="unknown option"):
+        venv.reset(seed=0, options={"bogus": 1, "reset_mask": np.array([False, True, False])})
+    venv.reset(seed=0, options={"reset_mask": np.array([True, False, True])})
+    with pytest.raises(ResetNeeded, match="slot 1 .*call reset first"):
+        venv.step(actions)
+    venv.reset(seed=0)
+    venv.step(actions)
+
+
+def test_a_reset_that_fails_while_building_the_level_leaves_no_episode(monkeypatch: pytest.MonkeyPatch) -> None:
+    from gymnasium.error import ResetNeeded
+
+    core = envs.make_core("ProofOfMemory-v0", num_envs=3)
+    core.reset_slots(range(3), [0, 1, 2])
+    original = type(core)._reset_slot
+
+    def failing(self, k, rng, opts):
+        original(self, k, rng, opts)  # the level is half written when it fails
+        if k == 1:
+            raise RuntimeError("no room for the level")
+
+    monkeypatch.setattr(type(core), "_reset_slot", failing)
+    with pytest.raises(RuntimeError, match="no room"):
+        core.reset_slots([0, 1], [5, 6])
+    monkeypatch.undo()
+    with pytest.raises(ResetNeeded, match="slots 0, 1 .*call reset first"):
+        core.step(np.zeros(3, np.int64))
+    core.step(np.zeros(1, np.int64), idx=[2])  # the slot whose reset did not fail plays on
+    core.reset_slots([0, 1], [5, 6])
+    core.step(np.zeros(3, np.int64))

@@ -9,7 +9,7 @@ import numpy as np
 
 import envs
 from envs.core import BatchedCore
-from tests.parity import jsonable, values_equal
+from scripts.reference.parity import jsonable, values_equal
 
 ActionChooser = Callable[[np.random.Generator, list[BatchedCore]], np.ndarray]
 

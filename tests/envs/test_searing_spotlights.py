@@ -26,7 +26,7 @@ from envs.searing_spotlights import (
     paint_hud_row,
     sample_position,
 )
-from tests.batching import check_batched_equals_singles, check_vector_env_matches_singles
+from tests.support.batching import check_batched_equals_singles, check_vector_env_matches_singles
 
 IDS = ["SearingSpotlights-v0", "Endless-SearingSpotlights-v0"]
 NO_SPOTLIGHTS = {"initial_spawns": 0}  # plus "num_spawns": 0 for SearingSpotlights-v0

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import envs
-from envs.mystery_path_generator import generate_path
+from envs.mystery_path.generator import generate_path
 from envs.rng import seeded_generator
-from scripts.trace_format import load_mp_paths
+from scripts.reference.trace_format import load_mp_paths
 
 GRID = 7
 SIDES = {  # cardinal_origin_choice value -> (origin, goal) from the two row/column draws
@@ -94,3 +94,68 @@ def test_generator_leaves_the_rng_where_one_draw_at_a_time_would() -> None:
         assert rng.bit_generator.state == again.bit_generator.state
     with pytest.raises(TypeError, match="PCG64"):
         generate_path(np.random.Generator(np.random.Philox(0)), GRID, GRID, (0, 3), (6, 4))
+
+
+def _walls_by_calls(draws, start: int, end: int, highs: list[int] | None = None) -> list[int]:
+    """Stages 1 and 2 with one ``integers`` draw per call (``below``), as the module doc describes them; the bound
+    of each call is appended to ``highs``."""
+    from envs.mystery_path.generator import BORDER_WALL_COUNTS, WALL_PERCENT, _grid
+
+    def below(high: int) -> int:
+        if highs is not None and high > 1:
+            highs.append(high)
+        return draws.below(high)
+
+    grid = _grid(GRID, GRID)
+    walls = [tile for tile in grid.inner if below(100) < WALL_PERCENT]
+    wall_bits = sum(1 << tile for tile in walls)
+    candidates = [t for t in grid.border_candidates(start, end) if not grid.surrounding[t] & wall_bits]
+    for _ in range(BORDER_WALL_COUNTS[below(2)]):
+        if candidates:
+            walls.append(candidates.pop(below(len(candidates))))
+    return walls
+
+
+def test_rejected_words_are_the_words_numpy_draws_again_after() -> None:
+    from envs.mystery_path.generator import rejected_words
+
+    for high in (2, 3, 5, 7, 12, 100):
+        words = rejected_words(high)
+        assert len(words) == 2**32 % high  # (w * high mod 2**32 takes each multiple of gcd(high, 2**32) that often)
+        assert all((w * high) % 2**32 < 2**32 % high for w in words)
+        rng = np.random.default_rng(high)
+        sample = rng.integers(0, 2**32, 10_000, dtype=np.uint64).tolist()
+        assert [w for w in sample if (w * high) % 2**32 < 2**32 % high] == [w for w in sample if w in words]
+
+
+@pytest.mark.parametrize("rejected", [None, 0, 7, 15, "pick"])
+def test_walls_read_from_the_words_equal_one_draw_per_call_also_when_numpy_draws_again(rejected) -> None:
+    """``draw_walls`` reads the draws straight from the words; a word that numpy rejects (and draws again after)
+    sends it through ``below``: the walls and the words used are those of one ``integers`` call per draw."""
+    from envs.mystery_path.generator import _grid, draw_walls, rejected_words
+    from envs.rng import BoundedDraws
+
+    start, end = 3, 45  # (0, 3) -> (6, 3)
+    tested = 0
+    for seed in range(40):
+        rng = seeded_generator(seed)
+        words = BoundedDraws(rng)
+        words.read_ahead(100)
+        highs: list[int] = []
+        probe = BoundedDraws(rng)
+        probe.words, probe.saved = list(words.words), words.saved
+        _walls_by_calls(probe, start, end, highs)
+        assert len(highs) > 17 and highs[:17] == [100] * 16 + [2]
+        if rejected == "pick":  # the first border pick, after the inner walls' 16 words and the count's
+            if not rejected_words(highs[17]):
+                continue  # a power of two: numpy never draws again
+            words.words[17] = sorted(rejected_words(highs[17]))[seed % len(rejected_words(highs[17]))]
+            tested += 1
+        elif rejected is not None:
+            words.words[rejected] = sorted(rejected_words(100))[seed % 96]
+        fast, slow = BoundedDraws(rng), BoundedDraws(rng)
+        for draws in (fast, slow):
+            draws.words, draws.saved = list(words.words), words.saved
+        assert draw_walls(fast, _grid(GRID, GRID), start, end) == _walls_by_calls(slow, start, end)
+        assert fast.used == slow.used
+    assert rejected != "pick" or tested >= 10

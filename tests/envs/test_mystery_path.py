@@ -8,7 +8,7 @@ import pytest
 
 import envs
 from envs.mystery_path import TILE, MysteryPathCore
-from tests.batching import check_batched_equals_singles, check_vector_env_matches_singles
+from tests.support.batching import check_batched_equals_singles, check_vector_env_matches_singles
 
 IDS = ["MysteryPath-v0", "MysteryPath-Grid-v0", "Endless-MysteryPath-v0"]
 RED = np.array([255, 0, 0], dtype=np.uint8)
@@ -464,7 +464,7 @@ def test_vector_env_matches_single_envs(env_id: str) -> None:
 
 def _reference_segments(rng: np.random.Generator, count: int) -> list[list[tuple[int, int]]]:
     """The reference's endless reset: start row, then per segment a goal row and a level (8 columns apart)."""
-    from envs.mystery_path_generator import generate_path
+    from envs.mystery_path.generator import generate_path
 
     segments, start = [], int(rng.integers(0, 7))
     for s in range(count):
@@ -502,3 +502,22 @@ def test_endless_segments_are_built_lazily_with_the_reference_stream() -> None:
     after_four = _reference_segments(rng, 3)
     env.reset()  # generator continued: the draws of all four segments come first
     assert list(zip(*core.path_tiles(0), strict=True)) == [t for seg in after_four for t in seg]
+
+
+def test_a_reset_that_continues_the_generator_draws_but_does_not_build_the_last_episodes_segments(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The finished episode's remaining segments (the reference built them) only advance the generator: their
+    draws are made, their tiles never built; the new episode's level is still the reference's."""
+    rng = envs.core.seeded_generator(33)
+    _reference_segments(rng, 3)
+    second = _reference_segments(rng, 3)
+    env = make("Endless-MysteryPath-v0")
+    env.reset(seed=33)
+    core = core_of(env)
+    built = []
+    original = type(core)._add_segment
+    monkeypatch.setattr(type(core), "_add_segment", lambda self, k, draws: built.append(k) or original(self, k, draws))
+    env.reset()  # generator continued: the draws of two unbuilt segments come first
+    assert built == [0] and core.num_segments[0] == 1
+    assert list(zip(*core.path_tiles(0), strict=True)) == [t for seg in second for t in seg]
