@@ -5,7 +5,8 @@
 For every size, a ``lm="random"`` branch (84x84x3 observations) is stepped ``--steps`` times per round after a
 warm-up that fills the memory; the per-step time of :meth:`HelmBranch.step` and of its parts (projection,
 retrieval, transformer = the rest) is reported as the best and the median round (the machine may be shared).
-Random weights cost what pretrained weights of the same shape cost. Prints a table.
+Random weights cost what pretrained weights of the same shape cost. Prints a table and writes
+``results/benchmarks/helm.json`` atomically (with versions, git revision, machine).
 """
 
 from __future__ import annotations
@@ -17,11 +18,13 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 
 import torch  # noqa: E402
 
 from agents.helm import HelmBranch  # noqa: E402
+from agents.io import provenance, write_json_atomic  # noqa: E402
 
 # name: (layers, width, heads, vocab, mem_len)
 SIZES = {
@@ -66,13 +69,15 @@ def measure(size: str, batch: int, steps: int, repeats: int) -> dict[str, list[f
     return times
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--batch", type=int, default=16)
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--sizes", nargs="+", default=["small", "small4", "gpt2-small"], choices=sorted(SIZES))
-    args = parser.parse_args()
+    parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks" / "helm.json")
+    args = parser.parse_args(argv)
+    rows = {}
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, batch {args.batch}, load {os.getloadavg()}")
     print(
         f"{'size':>11} {'L x d, V, mem':>22} {'step ms':>9} {'(median)':>9} {'proj ms':>8} {'retr ms':>8} {'LM ms':>7}"
@@ -88,6 +93,18 @@ def main() -> None:
             f"{size:>11} {shape:>22} {best['step']:9.2f} {median:9.2f} {best['projection']:8.2f} "
             f"{best['retrieval']:8.2f} {lm_ms:7.2f}"
         )
+        rows[size] = {
+            "layers": layers,
+            "width": width,
+            "vocab": vocab,
+            "mem_len": mem_len,
+            "best_ms": {**best, "transformer": lm_ms},
+            "median_step_ms": median,
+            "rounds_ms": {key: [t * 1e3 for t in values] for key, values in times.items()},
+        }
+    setting = {"batch": args.batch, "steps": args.steps, "repeats": args.repeats, "threads": torch.get_num_threads()}
+    write_json_atomic(args.out, {"setting": setting, "results": rows, **provenance()}, sort_keys=False)
+    print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":
