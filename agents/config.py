@@ -278,15 +278,20 @@ class Config:
 
 
 # ------------------------------------------------------------------------------------------------- loading
-def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Config:
-    """Read a YAML config, apply ``key=value`` overrides and validate everything."""
+def read_config_file(path: str | Path) -> dict[str, Any]:
+    """The mapping a YAML config file holds, or a :class:`ConfigError` naming what is wrong with the file."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist")
     raw = yaml.safe_load(path.read_text()) or {}
     if not isinstance(raw, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level, got {type(raw).__name__}")
-    return config_from_dict(raw, overrides)
+    return raw
+
+
+def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Config:
+    """Read a YAML config, apply ``key=value`` overrides and validate everything."""
+    return config_from_dict(read_config_file(path), overrides)
 
 
 def config_from_dict(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> Config:

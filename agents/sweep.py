@@ -64,6 +64,7 @@ from agents.config import (
     expand_grid,
     grid_panel,
     grid_slurm,
+    read_config_file,
 )
 from agents.io import atomic_write_text, now, provenance, write_json_atomic
 
@@ -139,11 +140,7 @@ class Panel:
 def load_panel(path: str | Path, overrides: Sequence[str] = (), root: str | Path = "runs") -> Panel:
     """The panel of a grid config file: the base validated, every point expanded and named."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"config file {str(path)!r} does not exist")
-    raw = yaml.safe_load(path.read_text()) or {}
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level, got {type(raw).__name__}")
+    raw = read_config_file(path)
     try:
         return panel_from_dict(raw, overrides, root=root, name=None, source=path)
     except ConfigError as err:
