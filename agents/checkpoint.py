@@ -10,6 +10,7 @@ and for :func:`load_policy`.
 from __future__ import annotations
 
 import io
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -102,6 +103,14 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     if state.get("format") != CHECKPOINT_FORMAT:
         raise ValueError(f"{path}: checkpoint format {state.get('format')!r}, expected {CHECKPOINT_FORMAT}")
     return state
+
+
+def finished_update(run_dir: str | Path) -> int | None:
+    """The last update of a run that completed (``run_info.json``'s ``finished``), else None."""
+    path = Path(run_dir) / "run_info.json"
+    if not path.is_file():
+        return None
+    return json.loads(path.read_text()).get("finished", {}).get("update")
 
 
 def run_config(run_dir: str | Path) -> Config:

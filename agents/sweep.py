@@ -49,7 +49,7 @@ from typing import Any
 
 import yaml
 
-from agents.checkpoint import checkpoint_update, latest_checkpoint, run_config
+from agents.checkpoint import checkpoint_update, finished_update, latest_checkpoint, run_config
 from agents.config import (
     GRID_SETTINGS,
     NAMED_AXES,
@@ -221,6 +221,8 @@ def run_status(run: SweepRun) -> RunStatus:
             )
     latest = latest_checkpoint(run.run_dir) if run.run_dir.is_dir() else None
     update = checkpoint_update(latest) if latest is not None else 0
+    if latest is None and saved is not None:  # a finished run whose checkpoints are gone (e.g. a committed copy)
+        update = finished_update(run.run_dir) or 0
     if saved is None:
         if latest is not None:
             raise SweepError(f"{run.name}: {run.run_dir} holds checkpoints but no config.yaml; move it away")
@@ -641,15 +643,18 @@ def final_evaluation(run: SweepRun, device: str = "cpu") -> list[dict[str, Any]]
     from agents.evaluation import evaluate_runs, read_records
 
     latest = latest_checkpoint(run.run_dir)
-    if latest is None:
+    update = checkpoint_update(latest) if latest is not None else finished_update(run.run_dir)
+    if update is None:
         raise SweepError(f"{run.name}: no checkpoint to evaluate")
-    step = checkpoint_update(latest) * run.config.batch_size
+    step = update * run.config.batch_size
     out = run.run_dir / FINAL_EVALUATION
     path = out / "episodes.csv"
     if path.is_file():
         records = read_records(path)
         if records and all(record["step"] == step for record in records):
             return records
+    if latest is None:
+        raise SweepError(f"{run.name}: finished, but neither its checkpoint nor its final evaluation is here")
     evaluate_runs([run.run_dir], out, device=device)
     return read_records(path)
 

@@ -156,6 +156,8 @@ class Trainer:
             writer.close()
             if progress is not None:
                 progress.close()
+        if self.update == self.num_updates:
+            self._mark_finished()
         return self.history
 
     def evaluate_now(self) -> dict[str, float]:
@@ -363,6 +365,14 @@ class Trainer:
             self.eval_records = [r for r in read_records(evaluated) if r["step"] <= self.global_step]
 
     # ------------------------------------------------------------------------------------------- run files
+    def _mark_finished(self) -> None:
+        """Say in run_info.json that the run is complete: a sweep then knows it without the checkpoints (which a
+        committed copy of the run directory leaves out)."""
+        info_path = self.run_dir / "run_info.json"
+        info = json.loads(info_path.read_text())
+        info["finished"] = {"time": now(), "update": self.update, "step": self.global_step}
+        write_json_atomic(info_path, info, sort_keys=False)
+
     def _write_run_files(self) -> None:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         config_path = self.run_dir / "config.yaml"

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -110,6 +111,18 @@ def test_local_sweep_end_to_end_with_evaluate(tmp_path: Path, capsys: pytest.Cap
     err = capsys.readouterr().err
     assert "two/ppo/pom/seed7" in err and "ppo.epochs: saved 1, now 2" in err
     assert {name: _snapshot(root.joinpath(*name.split("/"))) for name in names} == before
+
+    # a committed copy of the runs keeps their records, not their checkpoints: they stay finished, are not trained
+    # again, and the panel's results come from their final evaluations
+    _write(config, grid)
+    for name in names:
+        shutil.rmtree(root.joinpath(*name.split("/"), "checkpoints"))
+    summary_before = json.loads((results / "summary.json").read_text())
+    assert sweep_script.main([str(config), "--root", str(root), *only_ppo, "--evaluate"]) == 0
+    assert "nothing to train" in capsys.readouterr().out
+    assert not (root / "two" / "ppo" / "pom" / "seed7" / "checkpoints").exists()
+    summary_after = json.loads((results / "summary.json").read_text())
+    assert summary_after["runs"] == [r for r in summary_before["runs"] if r["run"].startswith("two/ppo/")]
 
 
 def test_a_killed_sweep_finishes_on_the_second_call(tmp_path: Path) -> None:
