@@ -21,3 +21,29 @@ def test_readme_has_exactly_two_setup_commands_and_ci_runs_the_test_one() -> Non
     assert test_command in (ROOT / ".ci" / "run").read_text()
     config = re.search(r"--config (\S+)", main_job).group(1)
     assert (ROOT / config).is_file(), config
+
+
+def test_the_quickstart_promises_the_same_duration_everywhere() -> None:
+    readme = (ROOT / "README.md").read_text()
+    header = (ROOT / "configs" / "quickstart.yaml").read_text().splitlines()[0]
+    assert "about a minute" in header and "GRU-PPO on `ProofOfMemory-v0`, about a minute" in readme
+
+
+def test_what_the_project_says_it_has_exists() -> None:
+    """The package description names only baselines that exist, and the error for a grid names a real script."""
+    import tomllib
+
+    from agents.config import config_from_dict
+    from agents.models import MEMORY_MODULES
+    from agents.trainer import Trainer
+
+    description = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["description"]
+    assert "Transformer-XL" not in description and "trxl" not in MEMORY_MODULES
+    assert all(word in description for word in ("frame stacking", "HELM", "GRU"))
+    try:
+        Trainer(config_from_dict({"grid": {"run.seed": [1, 2]}}), ROOT / "runs" / "never-created")
+    except ValueError as err:
+        script = re.search(r"scripts/\w+\.py", str(err)).group(0)
+        assert (ROOT / script).is_file(), script
+    else:
+        raise AssertionError("a config with a grid was accepted by the trainer")
