@@ -652,3 +652,25 @@ def format_table(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | Non
     table = [columns] + [[cell(row.get(name)) for name in columns] for row in rows]
     widths = [max(len(line[i]) for line in table) for i in range(len(columns))]
     return "\n".join("  ".join(text.rjust(width) for text, width in zip(line, widths, strict=True)) for line in table)
+
+
+def separation(rows: Sequence[Mapping[str, Any]], better: str, worse: str, step: int | None = None) -> dict[str, Any]:
+    """Whether method ``better`` beats ``worse`` beyond doubt at ``step`` (default: the last step both have), per
+    task: its 95% interval lies wholly above the other's (the intervals of :func:`aggregate` rows do not overlap).
+    Returns ``{"step", "tasks": {task: {"better": row, "worse": row, "separated": bool}}, "separated": all}``."""
+    by_key = {(row["method"], row["task"], row["step"]): row for row in rows if row["task"] != "all"}
+    tasks = sorted({task for method, task, _ in by_key if method == better} & {t for m, t, _ in by_key if m == worse})
+    if not tasks:
+        raise ValueError(f"no task has aggregate rows of both {better!r} and {worse!r}")
+    shared = set.intersection(*({s for m, t, s in by_key if m in (better, worse) and t == task} for task in tasks))
+    if step is None:
+        if not shared:
+            raise ValueError(f"{better!r} and {worse!r} share no evaluated step")
+        step = max(shared)
+    found = {}
+    for task in tasks:
+        high, low = by_key.get((better, task, step)), by_key.get((worse, task, step))
+        if high is None or low is None:
+            raise ValueError(f"no aggregate rows of both {better!r} and {worse!r} for task {task!r} at step {step}")
+        found[task] = {"better": dict(high), "worse": dict(low), "separated": bool(high["low"] > low["high"])}
+    return {"step": step, "tasks": found, "separated": all(entry["separated"] for entry in found.values())}
