@@ -128,11 +128,25 @@ class Actor:
         self._reset(np.arange(self.num_envs), [int(s) for s in seeds])
 
     def decide(self, greedy: bool = False) -> Decision:
-        """The policy's decision for every slot on the current inputs (sampled, or argmax with ``greedy``)."""
+        """The policy's decision for every active slot on the current inputs (sampled, or argmax with ``greedy``);
+        a stopped slot (evaluation) costs nothing, keeps its memory state and gets action 0."""
         inputs = self.inputs()
+        state = self.memory.recurrent
         with torch.inference_mode():
-            logits, values, next_state = self.model.step(inputs, self.memory.recurrent)
-            actions, log_probs = choose_actions(logits, self.generator, greedy)
+            if self.active.all():
+                logits, values, next_state = self.model.step(inputs, state)
+                actions, log_probs = choose_actions(logits, self.generator, greedy)
+            else:
+                rows = torch.from_numpy(np.flatnonzero(self.active)).to(self.device)
+                some = {name: tensor.index_select(0, rows) for name, tensor in inputs.items()}
+                logits, some_values, some_state = self.model.step(some, state.index_select(0, rows))
+                some_actions, some_log_probs = choose_actions(logits, self.generator, greedy)
+                actions = some_actions.new_zeros((self.num_envs, some_actions.shape[1])).index_copy(
+                    0, rows, some_actions
+                )
+                log_probs = some_log_probs.new_zeros(actions.shape).index_copy(0, rows, some_log_probs)
+                values = some_values.new_zeros(self.num_envs).index_copy(0, rows, some_values)
+                next_state = state.to(some_state.dtype).index_copy(0, rows, some_state)
         newest = {name: stack[:, -1] for name, stack in self.memory.stacks.items()}
         for name in ("previous_action", "previous_reward", "helm"):
             if name in inputs:
