@@ -521,3 +521,39 @@ def test_a_reset_that_continues_the_generator_draws_but_does_not_build_the_last_
     env.reset()  # generator continued: the draws of two unbuilt segments come first
     assert built == [0] and core.num_segments[0] == 1
     assert list(zip(*core.path_tiles(0), strict=True)) == [t for seg in second for t in seg]
+
+
+def test_endless_resets_of_many_slots_equal_resets_one_by_one() -> None:
+    """Endless slots reset together (the arrays of all of them written at once, the past-path starts of many slots
+    computed by ``walk_starts``) equal one-slot cores, with seeds and with continued generators."""
+    options = [
+        {"max_steps": 40},
+        {"camera_offset_scale": 2.3, "agent_speed": 4.0, "max_steps": 55},
+        {"show_past_path": False, "max_steps": 30},
+    ]
+    singles, episodes = check_batched_equals_singles(
+        "Endless-MysteryPath-v0",
+        options,
+        160,
+        lambda rng, singles: _actions(singles[0].single_action_space, rng, singles),
+        n=15,
+    )
+    assert episodes >= 30
+    assert max(int(s.num_segments[0]) for s in singles) >= 3  # segments were generated during steps
+
+
+def test_walk_starts_of_many_chains_equal_walk_start() -> None:
+    from envs.mystery_path import walk_start, walk_starts
+
+    rng = np.random.default_rng(5)
+    for depth in (0, 1, 2, 5):
+        chains = []
+        for _ in range(40):  # chains that go east and sometimes back west, as paths may
+            steps = rng.choice([-1, 0, 0, 1, 1, 1], size=int(rng.integers(1, 30)))
+            chains.append(np.maximum(np.cumsum(np.concatenate([[0], steps])), 0).tolist())
+        columns = np.full((len(chains), max(map(len, chains))), 99)
+        for s, xs in enumerate(chains):
+            columns[s, : len(xs)] = xs
+        starts = walk_starts(columns, depth)
+        for s, xs in enumerate(chains):
+            assert starts[s, : len(xs)].tolist() == [walk_start(xs, i, xs[i] - 1, depth) for i in range(len(xs))]
