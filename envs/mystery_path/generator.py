@@ -81,7 +81,9 @@ class _Grid:
     border: tuple[int, ...]  # border tiles, column by column
     distance: tuple[tuple[float, ...], ...]  # distance[goal][tile]: straight-line distance between the two
     tiles: tuple[Tile, ...]  # (x, y) of each index
+    touching: int  # bit mask of the inner tiles that surround a border tile
     _candidates: dict[tuple[int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
+    _free: dict[tuple[int, int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
 
     def border_candidates(self, start: int, end: int) -> tuple[int, ...]:
         """Border tiles that are neither ``start`` nor ``end`` nor a 4-neighbour of either (kept once computed)."""
@@ -89,6 +91,20 @@ class _Grid:
         if found is None:
             excluded = self.near[start] | self.near[end]
             found = self._candidates[start, end] = tuple(t for t in self.border if not (excluded >> t) & 1)
+        return found
+
+    def free_border(self, start: int, end: int, wall_bits: int) -> tuple[int, ...]:
+        """The :meth:`border_candidates` without an inner wall (``wall_bits``) among their surrounding tiles.
+
+        Kept once computed: only the inner walls in ``touching`` (7 of 16 tiles on a 7x7 grid) decide, so there are
+        few distinct answers, and a lookup is cheaper than testing every candidate.
+        """
+        key = (start, end, wall_bits & self.touching)
+        found = self._free.get(key)
+        if found is None:
+            surrounding = self.surrounding
+            candidates = self.border_candidates(start, end)
+            found = self._free[key] = tuple(t for t in candidates if not surrounding[t] & wall_bits)
         return found
 
 
@@ -111,7 +127,10 @@ def _grid(width: int, height: int) -> _Grid:
     inner = tuple(index(x, y) for x in range(1, width - 2) for y in range(1, height - 2))
     border = tuple(index(x, y) for x, y in tiles if x in (0, width - 1) or y in (0, height - 1))
     distance = tuple(tuple(math.sqrt((x - gx) ** 2 + (y - gy) ** 2) for x, y in tiles) for gx, gy in tiles)
-    return _Grid(width, height, tuple(neighbours), tuple(near), tuple(surrounding), inner, border, distance, tiles)
+    touching = sum(1 << t for t in inner if any(surrounding[b] >> t & 1 for b in border))
+    return _Grid(
+        width, height, tuple(neighbours), tuple(near), tuple(surrounding), inner, border, distance, tiles, touching
+    )
 
 
 def generate_path(rng: np.random.Generator, width: int, height: int, origin: Tile, goal: Tile) -> MysteryPathLayout:
@@ -149,11 +168,12 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
         drawn = draws.below_many(100, len(inner))
         walls = [tile for tile, draw in zip(inner, drawn, strict=True) if draw < WALL_PERCENT]
         used = draws.used
-    wall_bits = sum(1 << tile for tile in walls)
+    wall_bits = 0
+    for tile in walls:
+        wall_bits |= 1 << tile
 
     # 2. Border walls: 4 or 8 picks among the candidates, while there are any (a single one is taken without a draw).
-    surrounding = grid.surrounding
-    candidates = [t for t in grid.border_candidates(start, end) if not surrounding[t] & wall_bits]
+    candidates = list(grid.free_border(start, end, wall_bits))
     if used + 9 > len(words):
         draws.used = used
         draws.read_ahead()

@@ -159,3 +159,16 @@ def test_walls_read_from_the_words_equal_one_draw_per_call_also_when_numpy_draws
         assert draw_walls(fast, _grid(GRID, GRID), start, end) == _walls_by_calls(slow, start, end)
         assert fast.used == slow.used
     assert rejected != "pick" or tested >= 10
+
+
+def test_free_border_tiles_kept_by_the_touching_inner_walls_equal_a_test_of_every_candidate() -> None:
+    from envs.mystery_path.generator import _grid
+
+    grid = _grid(GRID, GRID)
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        start, end = (int(t) for t in rng.choice(grid.border, size=2, replace=False))
+        walls = [t for t in grid.inner if rng.random() < 0.33]
+        bits = sum(1 << t for t in walls)
+        expected = tuple(t for t in grid.border_candidates(start, end) if not grid.surrounding[t] & bits)
+        assert grid.free_border(start, end, bits) == expected
