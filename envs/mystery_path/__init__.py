@@ -71,6 +71,7 @@ from envs.mystery_path.generator import (
     MysteryPathLayout,
     draw_path,
     generate_path,
+    skip_path,
 )
 from envs.mystery_path.level import (
     AFTER_VISIT,
@@ -158,6 +159,7 @@ __all__ = [
     "generate_path",
     "ice_background",
     "option_specs",
+    "skip_path",
     "velocities",
     "walk_start",
     "walk_starts",

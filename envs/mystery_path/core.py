@@ -34,7 +34,7 @@ from envs.mystery_path.endless import (
     walk_start,
     walk_starts,
 )
-from envs.mystery_path.generator import draw_path, generate_path
+from envs.mystery_path.generator import draw_path, generate_path, skip_path
 from envs.mystery_path.level import (
     AFTER_VISIT,
     ENDLESS_ACTIONS,
@@ -423,7 +423,7 @@ class MysteryPathCore(BatchedCore):
         for segment in range(len(self.segment_ends[k]), int(self.reference_segments[k])):
             start_y = draws.below(GRID) if segment == 0 else goal_y
             goal_y = draws.below(GRID)
-            draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
+            skip_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
 
     def path_tiles(self, k: int) -> tuple[list[int], list[int]]:
         """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""

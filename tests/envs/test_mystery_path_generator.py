@@ -172,3 +172,23 @@ def test_free_border_tiles_kept_by_the_touching_inner_walls_equal_a_test_of_ever
         bits = sum(1 << t for t in walls)
         expected = tuple(t for t in grid.border_candidates(start, end) if not grid.surrounding[t] & bits)
         assert grid.free_border(start, end, bits) == expected
+
+
+def test_skip_path_makes_the_draws_of_draw_path() -> None:
+    """The search without parents uses the same words, so the generator ends where a built level leaves it."""
+    from envs.mystery_path.generator import draw_path, skip_path
+    from envs.rng import BoundedDraws
+
+    rng = np.random.default_rng(8)
+    for seed in range(300):
+        origin, goal = (0, int(rng.integers(0, GRID))), (GRID - 1, int(rng.integers(0, GRID)))
+        if seed % 3 == 0:
+            origin, goal = (int(rng.integers(0, GRID)), GRID - 1), (int(rng.integers(0, GRID)), 0)
+        built, skipped = seeded_generator(seed), seeded_generator(seed)
+        for generator, make in ((built, draw_path), (skipped, skip_path)):
+            draws = BoundedDraws(generator)
+            draws.read_ahead(4)  # short blocks: the search reads ahead on the way
+            for _ in range(3):
+                make(draws, GRID, GRID, origin, goal)
+            draws.close()
+        assert built.bit_generator.state == skipped.bit_generator.state, seed
