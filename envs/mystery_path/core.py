@@ -63,7 +63,11 @@ from envs.rng import BoundedDraws
 
 SCALAR_SLOTS = 2  # up to this many slots per step are stepped one by one (see MysteryPathCore._step)
 BATCHED_WALKS = 4  # a reset of this many endless slots computes their past-path starts with array operations
-LEVEL_OUTPUTS = 48  # 64-bit outputs read ahead per endless level (most levels use fewer than 80 words)
+# 64-bit outputs (two words each) read ahead at once: for a level that is built, enough for its walls (at most ~26
+# words) and the most words a search can use (84, see generator.draw_path), so it needs no second read; for a level
+# that is skipped, a little more than most levels use (66 words on average, 89 at most in 2000 levels).
+LEVEL_OUTPUTS = 56
+SKIPPED_OUTPUTS = 40
 
 
 class MysteryPathCore(BatchedCore):
@@ -257,7 +261,7 @@ class MysteryPathCore(BatchedCore):
             draws = BoundedDraws(rng)
             if self.segment_rng[k] is rng:
                 skipped = int(self.reference_segments[k]) - len(self.segment_ends[k])
-                draws.read_ahead(LEVEL_OUTPUTS * (1 + skipped))
+                draws.read_ahead(SKIPPED_OUTPUTS * skipped + LEVEL_OUTPUTS)
                 self._skip_segments(k, draws)
             else:
                 draws.read_ahead(LEVEL_OUTPUTS)
@@ -408,7 +412,7 @@ class MysteryPathCore(BatchedCore):
         if len(ends) < self.reference_segments[k]:
             begin = ends[-1]
             draws = BoundedDraws(self.segment_rng[k])
-            draws.read_ahead()
+            draws.read_ahead(LEVEL_OUTPUTS * (int(self.reference_segments[k]) - len(ends)))
             while len(ends) < self.reference_segments[k]:
                 self._add_segment(k, draws)
             draws.close()

@@ -83,6 +83,7 @@ class _Grid:
     distance: tuple[tuple[float, ...], ...]  # distance[goal][tile]: straight-line distance between the two
     tiles: tuple[Tile, ...]  # (x, y) of each index
     touching: int  # bit mask of the inner tiles that surround a border tile
+    edges: int  # pairs of 4-neighbours: the most words a search can use (see draw_path)
     _candidates: dict[tuple[int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
     _free: dict[tuple[int, int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
 
@@ -129,8 +130,19 @@ def _grid(width: int, height: int) -> _Grid:
     border = tuple(index(x, y) for x, y in tiles if x in (0, width - 1) or y in (0, height - 1))
     distance = tuple(tuple(math.sqrt((x - gx) ** 2 + (y - gy) ** 2) for x, y in tiles) for gx, gy in tiles)
     touching = sum(1 << t for t in inner if any(surrounding[b] >> t & 1 for b in border))
+    edges = sum(len(four) for four in neighbours) // 2
     return _Grid(
-        width, height, tuple(neighbours), tuple(near), tuple(surrounding), inner, border, distance, tiles, touching
+        width,
+        height,
+        tuple(neighbours),
+        tuple(near),
+        tuple(surrounding),
+        inner,
+        border,
+        distance,
+        tiles,
+        touching,
+        edges,
     )
 
 
@@ -222,6 +234,11 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
     # The step costs integers(1, 9) are read inline from the 32-bit outputs: for a range of 8 numpy's method is
     # "the top 3 bits" and never redraws.
     assert COST_HIGH - COST_LOW == 8
+    # A word is used when an expanded tile examines a neighbour that is not closed; the neighbour, expanded later,
+    # finds the tile closed. So a search uses at most one word per pair of neighbours, and reading that many ahead
+    # once spares a test per expanded tile.
+    if draws.used + grid.edges > len(draws.words):
+        draws.read_ahead(max(BoundedDraws.BLOCK, (grid.edges + 1) // 2))
     words, used = draws.words, draws.used
     while open_tiles:
         head, pick = open_f[0], 0
@@ -234,9 +251,6 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
             break
         del open_tiles[pick], open_f[pick]
         state[current] = 2
-        if used + 4 > len(words):  # enough words for every neighbour
-            draws.used = used
-            draws.read_ahead()
         g_current = g[current] + COST_LOW
         for tile in neighbours[current]:
             seen = state[tile]
@@ -286,6 +300,8 @@ def skip_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
     g = [0] * n
     open_tiles, open_f = [start], [0.0]
     state[start] = 1
+    if draws.used + grid.edges > len(draws.words):  # as in draw_path
+        draws.read_ahead(max(BoundedDraws.BLOCK, (grid.edges + 1) // 2))
     words, used = draws.words, draws.used
     while open_tiles:
         head, pick = open_f[0], 0
@@ -298,9 +314,6 @@ def skip_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
             break
         del open_tiles[pick], open_f[pick]
         state[current] = 2
-        if used + 4 > len(words):
-            draws.used = used
-            draws.read_ahead()
         g_current = g[current] + COST_LOW
         for tile in neighbours[current]:
             seen = state[tile]
