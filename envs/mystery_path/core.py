@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.core import BatchedCore, Index
-from envs.drawing import SCREEN, SpriteScatter, agent_sprites, blend, round_half_away
+from envs.drawing import SCREEN, SpriteScatter, SpriteSheet, agent_sprites, blend, round_half_away
 from envs.mystery_path.canvas import Canvas, fall_off_cross
 from envs.mystery_path.endless import (
     BACKGROUND_EDGE,
@@ -105,6 +105,11 @@ class MysteryPathCore(BatchedCore):
         self.reward_table = np.zeros((n, 4), dtype=np.float64)  # reward of a step, by what the agent stepped on
         # Drawing.
         self.agents = SpriteScatter()
+        # Endless: the agent sprites of each scale as a sheet (by the id of their first sprite in `agents`), and the
+        # sheet of the one scale that every slot uses, if they do: the agents are then pasted through it (see _draw;
+        # endless agents stay in one screen column, away from the edges, where a sheet's windows are cheapest).
+        self.agent_sheets: dict[int, SpriteSheet] = {}
+        self.agent_sheet: tuple[SpriteSheet, int] | None = None  # (sheet, id of its first sprite in `agents`)
         self.crosses = SpriteScatter()
         self.cross_id = self.crosses.add((fall_off_cross(),))
         self.sprite0 = np.zeros(n, dtype=np.int64)  # sprite id of heading 0 at the slot's agent scale
@@ -170,6 +175,11 @@ class MysteryPathCore(BatchedCore):
         radius = int(25 * scale)
         at = slots[0] if len(slots) == 1 else np.array(slots)  # one slot: scalar writes are cheaper
         self.sprite0[at] = first
+        if self.endless:
+            sheet = self.agent_sheets.get(first)
+            if sheet is None:
+                sheet = self.agent_sheets[first] = SpriteSheet(agent_sprites(scale), 0, 0)
+            self.agent_sheet = (sheet, first) if self.num_envs == 1 or (self.sprite0 == first).all() else None
         self.half[at] = self.agents.sprites[first].width // 2
         if not self.grid:
             self.velocity[at] = velocities(self.endless, float(opts["agent_speed"]))
@@ -706,8 +716,12 @@ class MysteryPathCore(BatchedCore):
         else:
             self.canvas.view[idx] = self.background[idx]
             left = pos[:, 0] - self.half[idx]
-        sprite = self.sprite0[idx] + self.heading[idx] // 45
-        self.canvas.paste(self.agents, slots, sprite, top, left, may_leave_screen=self.endless)
+        if self.agent_sheet is not None:
+            sheet, first = self.agent_sheet
+            self.canvas.paste_sheet(sheet, self.agents, first, slots, self.heading[idx] // 45, top, left, self.endless)
+        else:
+            sprite = self.sprite0[idx] + self.heading[idx] // 45
+            self.canvas.paste(self.agents, slots, sprite, top, left, may_leave_screen=self.endless)
         if self.endless:
             bar = self.show_stamina[idx]
             if bar.any():

@@ -557,3 +557,22 @@ def test_walk_starts_of_many_chains_equal_walk_start() -> None:
         starts = walk_starts(columns, depth)
         for s, xs in enumerate(chains):
             assert starts[s, : len(xs)].tolist() == [walk_start(xs, i, xs[i] - 1, depth) for i in range(len(xs))]
+
+
+# agents away from the screen's edge, at the edge (their sheet windows reach past it), and both in one batch
+@pytest.mark.parametrize("options", [[{}], [{"camera_offset_scale": 0.0}], [{}, {"camera_offset_scale": 0.0}]])
+def test_endless_agents_of_one_scale_pasted_through_their_sheet_equal_single_environments(options: list) -> None:
+    """When every endless slot uses one agent scale, the batched frames paste the agents through a SpriteSheet
+    (windowed composite) instead of the pixel scatter of mixed scales: same frames as one-slot cores."""
+    core = envs.make_core("Endless-MysteryPath-v0", num_envs=8)
+    core.reset_slots(range(8), range(8), options[0])
+    assert core.agent_sheet is not None
+    core.reset_slot(3, seed=3, options={"agent_scale": 0.4})
+    assert core.agent_sheet is None
+    check_batched_equals_singles(
+        "Endless-MysteryPath-v0",
+        [{"max_steps": 45, **o} for o in options],
+        90,
+        lambda rng, singles: _actions(singles[0].single_action_space, rng, singles),
+        n=8,
+    )
