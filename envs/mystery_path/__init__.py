@@ -69,8 +69,11 @@ from envs.mystery_path.endless import (
 )
 from envs.mystery_path.generator import (
     MysteryPathLayout,
+    draw_level,
     draw_path,
     generate_path,
+    level_grid,
+    skip_level,
     skip_path,
 )
 from envs.mystery_path.level import (
@@ -153,12 +156,15 @@ __all__ = [
     "TILE_OF_PIXEL",
     "WALL_COLOUR",
     "WEST",
+    "draw_level",
     "draw_path",
     "fall_off_cross",
     "fill_tile",
     "generate_path",
     "ice_background",
+    "level_grid",
     "option_specs",
+    "skip_level",
     "skip_path",
     "velocities",
     "walk_start",

@@ -34,7 +34,7 @@ from envs.mystery_path.endless import (
     walk_start,
     walk_starts,
 )
-from envs.mystery_path.generator import draw_path, generate_path, skip_path
+from envs.mystery_path.generator import draw_level, generate_path, level_grid, skip_level
 from envs.mystery_path.level import (
     AFTER_VISIT,
     ENDLESS_ACTIONS,
@@ -67,6 +67,7 @@ BATCHED_WALKS = 4  # a reset of this many endless slots computes their past-path
 # words) and the most words a search can use (84, see generator.draw_path), so it needs no second read; for a level
 # that is skipped, a little more than most levels use (66 words on average, 89 at most in 2000 levels).
 LEVEL_OUTPUTS = 56
+SEGMENT_GRID = level_grid(GRID, GRID)  # an endless segment's tables; its tiles are indexed 7 * x + y
 SKIPPED_OUTPUTS = 40
 
 
@@ -329,7 +330,7 @@ class MysteryPathCore(BatchedCore):
         segment = len(ends)
         start_y = draws.below(GRID) if segment == 0 else ys[-1]  # the last transition tile's row
         goal_y = draws.below(GRID)
-        path, _ = draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
+        path, _ = draw_level(draws, SEGMENT_GRID, start_y, (GRID - 1) * GRID + goal_y)  # (0, start_y) -> (6, goal_y)
         shift = segment * SEGMENT_COLUMNS
         xs += [t // GRID + shift for t in path]
         xs.append(shift + GRID)  # the transition tile
@@ -437,7 +438,7 @@ class MysteryPathCore(BatchedCore):
         for segment in range(len(self.segment_ends[k]), int(self.reference_segments[k])):
             start_y = draws.below(GRID) if segment == 0 else goal_y
             goal_y = draws.below(GRID)
-            skip_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
+            skip_level(draws, SEGMENT_GRID, start_y, (GRID - 1) * GRID + goal_y)
 
     def path_tiles(self, k: int) -> tuple[list[int], list[int]]:
         """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""

@@ -209,6 +209,11 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
     return walls
 
 
+def level_grid(width: int, height: int) -> _Grid:
+    """The tables of a ``width`` x ``height`` grid (built once), for :func:`draw_level` and :func:`skip_level`."""
+    return _grid(int(width), int(height))
+
+
 def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: Tile) -> tuple[list[int], list[int]]:
     """:func:`generate_path` on tile indices ``x * height + y``: (path origin first, walls), drawn from ``draws``.
 
@@ -217,8 +222,12 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
     grid = _grid(int(width), int(height))
     start = int(origin[0]) * grid.height + int(origin[1])
     end = int(goal[0]) * grid.height + int(goal[1])
-    n = grid.width * grid.height
+    return draw_level(draws, grid, start, end)
 
+
+def draw_level(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> tuple[list[int], list[int]]:
+    """:func:`draw_path` from tile index ``start`` to tile index ``end`` of ``grid`` (:func:`level_grid`)."""
+    n = grid.width * grid.height
     walls = draw_walls(draws, grid, start, end)
 
     # 3. Randomised best-first search. Tile states: 0 not seen, 1 open, 2 closed or wall. The open list is kept as
@@ -292,6 +301,11 @@ def skip_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
     grid = _grid(int(width), int(height))
     start = int(origin[0]) * grid.height + int(origin[1])
     end = int(goal[0]) * grid.height + int(goal[1])
+    skip_level(draws, grid, start, end)
+
+
+def skip_level(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> None:
+    """:func:`skip_path` from tile index ``start`` to tile index ``end`` of ``grid`` (:func:`level_grid`)."""
     n = grid.width * grid.height
     state = [0] * n
     for tile in draw_walls(draws, grid, start, end):
