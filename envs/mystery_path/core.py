@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from itertools import chain
 from typing import Any
 
 import gymnasium as gym
@@ -286,7 +287,7 @@ class MysteryPathCore(BatchedCore):
         self.num_segments[at] = 1
         self.tile_node[at] = -1
         ends = [self.segment_ends[k][0] for k in slots]
-        x, _ = self._store_chains(slots, [0] * len(slots))
+        x, nodes = self._store_chains(slots, [0] * len(slots))
         self.flags[at, 0] = REFILL  # the very first tile pays nothing
         self.ground_truth[at] = self.direction[at, 0]  # never west: the first tile is in column 0
         # The agent enters the first segment: its past-path starts (see _enter_segment).
@@ -294,7 +295,7 @@ class MysteryPathCore(BatchedCore):
             for k in slots:
                 self._store_walks(k, 0, self.segment_ends[k][0])
         else:
-            self._store_first_walks(slots, ends, x, opts)
+            self._store_first_walks(slots, ends, x, nodes, opts)
         self.walks_until[at] = ends[0] if len(slots) == 1 else ends
         self.prepare_at[at] = SEGMENT_COLUMNS * TILE
         start_y = [self.chain_lists[k][1][0] for k in slots]
@@ -340,8 +341,8 @@ class MysteryPathCore(BatchedCore):
 
     def _store_chains(self, slots: list[int], begins: list[int]) -> tuple[np.ndarray, np.ndarray]:
         """Write the chain tiles from ``begins[i]`` on of each slot of ``slots`` into the arrays: columns, rows,
-        directions, flags (fresh) and the tile -> chain index map. Returns the written columns and rows, slot after
-        slot.
+        directions, flags (fresh) and the tile -> chain index map. Returns the written tiles' columns and chain
+        indices, slot after slot.
 
         A tile's direction follows from the step to the next chain tile: path tiles are 4-neighbours, a goal's
         transition tile lies east of it and the next segment starts east of the transition tile; the last tile
@@ -358,8 +359,9 @@ class MysteryPathCore(BatchedCore):
             nodes = np.arange(begin, ends[0])
             last = -1
         else:
-            x = np.array([v for (xs, _), begin in zip(lists, begins, strict=True) for v in xs[begin:]])
-            y = np.array([v for (_, ys), begin in zip(lists, begins, strict=True) for v in ys[begin:]])
+            total = sum(ends) - sum(begins)
+            x = np.fromiter(chain.from_iterable(xs[b:] for (xs, _), b in zip(lists, begins, strict=True)), int, total)
+            y = np.fromiter(chain.from_iterable(ys[b:] for (_, ys), b in zip(lists, begins, strict=True)), int, total)
             counts = np.array(ends) - begins
             rows = np.repeat(slots, counts)
             last = np.cumsum(counts) - 1  # each slot's last tile in x and y
@@ -373,7 +375,7 @@ class MysteryPathCore(BatchedCore):
         self.direction[rows, cols] = DIRECTION_OF_STEP[step + 2]
         self.flags[rows, cols] = NEW_TILE | REFILL
         self.tile_node[rows, x, y + 1] = nodes  # tile_node[k, x, y + 1] = chain index
-        return x, y
+        return x, nodes
 
     def _store_walks(self, k: int, begin: int, end: int) -> None:
         """Where the past path starts behind an agent on each chain tile begin..end - 1 of slot ``k``."""
@@ -383,12 +385,13 @@ class MysteryPathCore(BatchedCore):
         else:
             self.walk_start[k, begin:end] = range(begin, end)
 
-    def _store_first_walks(self, slots: list[int], ends: list[int], x: np.ndarray, opts: dict[str, Any]) -> None:
-        """:meth:`_store_walks` of the first segment of many slots at once (``x``: their chains' columns, slot after
-        slot), with :func:`walk_starts`."""
+    def _store_first_walks(
+        self, slots: list[int], ends: list[int], x: np.ndarray, cols: np.ndarray, opts: dict[str, Any]
+    ) -> None:
+        """:meth:`_store_walks` of the first segment of many slots at once (``x`` and ``cols``: their chain tiles'
+        columns and chain indices, slot after slot), with :func:`walk_starts`."""
         counts = np.array(ends)
         rows = np.repeat(np.arange(len(slots)), counts)
-        cols = np.arange(len(x)) - np.repeat(np.cumsum(counts) - counts, counts)
         if opts["show_past_path"]:
             columns = np.zeros((len(slots), int(counts.max())), dtype=np.int64)
             columns[rows, cols] = x
