@@ -110,10 +110,14 @@ class Canvas:
         if may_leave_screen:
             m = self.margin
             top = np.minimum(np.maximum(top + sheet.top, -m), SCREEN + m - sheet.height) - sheet.top
-        # unsigned view: a negative column becomes huge, so one comparison tests both edges
+        # unsigned view: a negative column becomes huge, so one comparison tests both edges (rows fit: the margin is
+        # as high as the largest sprite, and windows off the screen were moved into it)
         inside = (left + sheet.left).view(np.uint64) <= SCREEN - sheet.width
         if inside.all():
-            sheet.paste(self.rows, slots, top + self.margin, left, which)
+            if len(slots) >= sheet.BATCH_MIN:
+                sheet.paste_inside(self.rows, slots, top + self.margin, left, which)
+            else:
+                sheet.paste(self.rows, slots, top + self.margin, left, which)
             return
         if not inside.any():
             self.paste(sprites, slots, first + which, top, left)

@@ -619,17 +619,25 @@ class MysteryPathCore(BatchedCore):
 
     def _step_endless(self, idx: Index, slots: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         back = self.off_path[idx]  # fell off last step: back to the first tile, camera reset, action ignored
-        code = np.where(back, 0, actions)
-        velocity = self.velocity[slots, code]
-        pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
-        pos += velocity
+        # The camera follows the agent horizontally; the background scrolls the other way and wraps.
+        if back.any():
+            code = np.where(back, 0, actions)
+            velocity = self.velocity[slots, code]
+            pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
+            pos += velocity
+            vx = velocity[:, 0]
+            self.camera_x[idx] = np.where(back, self.camera_offset[idx], self.camera_x[idx] + vx)
+            scroll = np.where(back, 0.0, self.bg_scroll[idx] - vx)
+        else:  # the same without the selections (most steps: no slot fell off in the last one)
+            code = actions
+            velocity = self.velocity[slots, code]
+            pos = self.pos[idx] + velocity
+            vx = velocity[:, 0]
+            self.camera_x[idx] += vx
+            scroll = self.bg_scroll[idx] - vx
         self.pos[idx] = pos
         turn = ENDLESS_HEADINGS[code]
         self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
-        # The camera follows the agent horizontally; the background scrolls the other way and wraps.
-        vx = velocity[:, 0]
-        self.camera_x[idx] = np.where(back, self.camera_offset[idx], self.camera_x[idx] + vx)
-        scroll = np.where(back, 0.0, self.bg_scroll[idx] - vx)
         wrap = np.abs(scroll) >= TILE
         if wrap.any():
             scroll = np.where(wrap, np.abs(scroll) % np.where(vx != 0, np.abs(vx), 1) * np.sign(scroll), scroll)
