@@ -765,7 +765,6 @@ class MysteryPathCore(BatchedCore):
         Black frames are cleared in one fill; then only the bands that hold something are written: every band of
         an ice floor, and the bands of a black floor that hold past-path tiles."""
         ice = self.show_background[idx]
-        phase = np.where(ice, (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
         if isinstance(idx, slice) and not ice.any():
             self.canvas.view.fill(0)
         elif not ice.all():
@@ -783,6 +782,7 @@ class MysteryPathCore(BatchedCore):
         band_of = np.flatnonzero(drawn)
         if len(band_of) == 0:
             return
+        phase = np.where(ice, (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
         band_slots = band_of // GRID
         edge = np.empty((len(band_of), BAND_WIDTH, 3), dtype=np.uint8)
         middle = np.empty((len(band_of), BAND_WIDTH, 3), dtype=np.uint8)
