@@ -64,11 +64,11 @@ from envs.rng import BoundedDraws
 
 SCALAR_SLOTS = 2  # up to this many slots per step are stepped one by one (see MysteryPathCore._step)
 BATCHED_WALKS = 4  # a reset of this many endless slots computes their past-path starts with array operations
-# 64-bit outputs (two words each) read ahead at once: for a level that is built, enough for its walls (at most ~26
-# words) and the most words a search can use (84, see generator.draw_path), so it needs no second read; for a level
-# that is skipped, a little more than most levels use (66 words on average, 89 at most in 2000 levels).
-LEVEL_OUTPUTS = 56
 SEGMENT_GRID = level_grid(GRID, GRID)  # an endless segment's tables; its tiles are indexed 7 * x + y
+# 64-bit outputs (two words each) read ahead at once: for a segment that is built, the most words it can use (its
+# start and goal rows, its walls and the longest search, see generator.draw_path), so its search needs no second
+# read; for a segment that is skipped, a little more than most use (66 words on average, 89 at most in 2000 levels).
+LEVEL_OUTPUTS = (2 + SEGMENT_GRID.level_words + 1) // 2
 SKIPPED_OUTPUTS = 40
 
 

@@ -84,6 +84,7 @@ class _Grid:
     tiles: tuple[Tile, ...]  # (x, y) of each index
     touching: int  # bit mask of the inner tiles that surround a border tile
     edges: int  # pairs of 4-neighbours: the most words a search can use (see draw_path)
+    level_words: int  # the most words a level uses (unless numpy draws again): walls, count, picks, search
     _candidates: dict[tuple[int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
     _free: dict[tuple[int, int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
 
@@ -131,6 +132,7 @@ def _grid(width: int, height: int) -> _Grid:
     distance = tuple(tuple(math.sqrt((x - gx) ** 2 + (y - gy) ** 2) for x, y in tiles) for gx, gy in tiles)
     touching = sum(1 << t for t in inner if any(surrounding[b] >> t & 1 for b in border))
     edges = sum(len(four) for four in neighbours) // 2
+    level_words = len(inner) + 1 + max(BORDER_WALL_COUNTS) + edges
     return _Grid(
         width,
         height,
@@ -143,6 +145,7 @@ def _grid(width: int, height: int) -> _Grid:
         tiles,
         touching,
         edges,
+        level_words,
     )
 
 
@@ -151,10 +154,12 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
 
     ``origin`` and ``goal`` should lie on the border; ``rng`` is advanced exactly as memory-gym 1.0.2 advances it.
     """
+    grid = _grid(int(width), int(height))
     draws = BoundedDraws(rng)
+    draws.read_ahead((grid.level_words + 1) // 2)  # one read for the whole level
     path, walls = draw_path(draws, width, height, origin, goal)
     draws.close()
-    tiles = _grid(int(width), int(height)).tiles
+    tiles = grid.tiles
     return MysteryPathLayout(path=tuple(tiles[t] for t in path), walls=tuple(tiles[t] for t in walls))
 
 
