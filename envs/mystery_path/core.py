@@ -20,6 +20,7 @@ from envs.mystery_path.endless import (
     DEBUG_PATH_ALPHA,
     DIRECTION_OF_STEP,
     DIRECTIONS,
+    EAST,
     INITIAL_SEGMENTS,
     NEW_TILE,
     PATH_TILE,
@@ -70,6 +71,7 @@ SEGMENT_GRID = level_grid(GRID, GRID)  # an endless segment's tables; its tiles 
 # read; for a segment that is skipped, a little more than most use (66 words on average, 89 at most in 2000 levels).
 LEVEL_OUTPUTS = (2 + SEGMENT_GRID.level_words + 1) // 2
 SKIPPED_OUTPUTS = 40
+STEP_LIST = DIRECTION_OF_STEP.tolist()  # the same as Python ints
 
 
 class MysteryPathCore(BatchedCore):
@@ -311,8 +313,8 @@ class MysteryPathCore(BatchedCore):
         k = slots[0]
         sprite, offset = int(self.sprite0[k]) + int(self.heading[k]) // 45, int(self.pos[k, 0] - self.half[k])
         options = (int(self.agent_screen_left[k]), bool(self.show_background[k]), bool(self.show_stamina[k]))
-        rows: dict[int, list[int]] = {}
-        for k, row in zip(slots, start_y, strict=True):
+        rows: dict[int, list[int]] = {start_y[0]: slots} if len(slots) == 1 else {}
+        for k, row in zip(slots, start_y, strict=True) if len(slots) > 1 else ():
             rows.setdefault(row, []).append(k)
         for row, same in rows.items():
             key = (sprite, row * TILE + offset, *options)  # the sprite and its top row (x = radius = y offset)
@@ -339,7 +341,7 @@ class MysteryPathCore(BatchedCore):
         ys.append(goal_y)
         ends.append(len(xs))
 
-    def _store_chains(self, slots: list[int], begins: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    def _store_chains(self, slots: list[int], begins: list[int]) -> tuple[Any, Any]:
         """Write the chain tiles from ``begins[i]`` on of each slot of ``slots`` into the arrays: columns, rows,
         directions, flags (fresh) and the tile -> chain index map. Returns the written tiles' columns and chain
         indices, slot after slot.
@@ -348,32 +350,36 @@ class MysteryPathCore(BatchedCore):
         transition tile lies east of it and the next segment starts east of the transition tile; the last tile
         written (a transition tile) points east too.
         """
+        if len(slots) == 1:  # the same with Python lists (a dozen tiles: cheaper than numpy calls)
+            k, begin = slots[0], begins[0]
+            xs, ys = self.chain_lists[k]
+            end = len(xs)
+            self._reserve(end, (len(self.segment_ends[k]) + 1) * SEGMENT_COLUMNS)
+            x, y = xs[begin:], ys[begin:]
+            self.chain_x[k, begin:end] = x
+            self.chain_y[k, begin:end] = y
+            steps = zip(x, x[1:], y, y[1:], strict=False)
+            self.direction[k, begin:end] = [STEP_LIST[2 * (b - a) + d - c + 2] for a, b, c, d in steps] + [EAST]
+            self.flags[k, begin:end] = NEW_TILE | REFILL
+            self.tile_node[k].put([a * (GRID + 2) + b + 1 for a, b in zip(x, y, strict=True)], range(begin, end))
+            return x, range(begin, end)
         lists = [self.chain_lists[k] for k in slots]
         ends = [len(xs) for xs, _ in lists]
         self._reserve(max(ends), (max(len(self.segment_ends[k]) for k in slots) + 1) * SEGMENT_COLUMNS)
-        if len(slots) == 1:
-            k, begin = slots[0], begins[0]
-            xs, ys = lists[0]
-            x, y = np.array(xs[begin:]), np.array(ys[begin:])
-            rows, cols = k, slice(begin, ends[0])
-            nodes = np.arange(begin, ends[0])
-            last = -1
-        else:
-            total = sum(ends) - sum(begins)
-            x = np.fromiter(chain.from_iterable(xs[b:] for (xs, _), b in zip(lists, begins, strict=True)), int, total)
-            y = np.fromiter(chain.from_iterable(ys[b:] for (_, ys), b in zip(lists, begins, strict=True)), int, total)
-            counts = np.array(ends) - begins
-            rows = np.repeat(slots, counts)
-            last = np.cumsum(counts) - 1  # each slot's last tile in x and y
-            nodes = np.arange(len(x)) + np.repeat(np.array(begins) - (last + 1 - counts), counts)
-            cols = nodes
+        total = sum(ends) - sum(begins)
+        x = np.fromiter(chain.from_iterable(xs[b:] for (xs, _), b in zip(lists, begins, strict=True)), int, total)
+        y = np.fromiter(chain.from_iterable(ys[b:] for (_, ys), b in zip(lists, begins, strict=True)), int, total)
+        counts = np.array(ends) - begins
+        rows = np.repeat(slots, counts)
+        last = np.cumsum(counts) - 1  # each slot's last tile in x and y
+        nodes = np.arange(len(x)) + np.repeat(np.array(begins) - (last + 1 - counts), counts)  # chain indices
         step = np.zeros(len(x), dtype=np.int64)
         step[:-1] = 2 * (x[1:] - x[:-1]) + (y[1:] - y[:-1])
-        step[last] = 2  # east
-        self.chain_x[rows, cols] = x
-        self.chain_y[rows, cols] = y
-        self.direction[rows, cols] = DIRECTION_OF_STEP[step + 2]
-        self.flags[rows, cols] = NEW_TILE | REFILL
+        step[last] = 0  # no step: east
+        self.chain_x[rows, nodes] = x
+        self.chain_y[rows, nodes] = y
+        self.direction[rows, nodes] = DIRECTION_OF_STEP[step + 2]
+        self.flags[rows, nodes] = NEW_TILE | REFILL
         self.tile_node[rows, x, y + 1] = nodes  # tile_node[k, x, y + 1] = chain index
         return x, nodes
 
