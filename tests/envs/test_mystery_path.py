@@ -576,3 +576,26 @@ def test_endless_agents_of_one_scale_pasted_through_their_sheet_equal_single_env
         lambda rng, singles: _actions(singles[0].single_action_space, rng, singles),
         n=8,
     )
+
+
+def test_endless_chains_stored_for_many_slots_equal_one_slot_at_a_time() -> None:
+    """_store_chains with array operations (several slots, any first tile) writes what the one-slot path writes."""
+    core = envs.make_core("Endless-MysteryPath-v0", num_envs=5)
+    core.reset_slots(range(5), range(5))
+    for k in range(5):  # longer chains: the reference's three segments (and more for two slots)
+        core.reference_segments[k] += k % 2
+        core._catch_up(k)
+    names = ("chain_x", "chain_y", "direction", "flags", "tile_node")
+    slots, begins = [0, 2, 3, 4], [3, 0, 11, 8]
+    written = {}
+    for many in (False, True):
+        for name in names:
+            getattr(core, name)[:] = 0
+        if many:
+            core._store_chains(slots, begins)
+        else:
+            for k, begin in zip(slots, begins, strict=True):
+                core._store_chains([k], [begin])
+        written[many] = [getattr(core, name).copy() for name in names]
+    for name, one, batch in zip(names, written[False], written[True], strict=True):
+        np.testing.assert_array_equal(batch, one, err_msg=name)
