@@ -61,6 +61,11 @@ def rejected_words(high: int) -> frozenset[int]:
     return frozenset((r // g * inverse) % modulus + j * modulus for r in range(0, threshold, g) for j in range(g))
 
 
+_REJECTED_WALL_WORDS = rejected_words(100)
+_BITS = tuple(1 << tile for tile in range(64))  # bit of each tile index (grids up to 64 tiles)
+_REDRAWN_BELOW = (0, *(_WORD % choices for choices in range(1, 65)))  # integers(0, n) draws again below this
+
+
 @dataclass(frozen=True)
 class MysteryPathLayout:
     """One generated level: the path (origin first, goal last) and the walls (inner ones first, then border ones)."""
@@ -178,7 +183,7 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
         draws.read_ahead()
     used = draws.used
     chunk = words[used : used + len(inner)]
-    if rejected_words(100).isdisjoint(chunk):
+    if _REJECTED_WALL_WORDS.isdisjoint(chunk):
         walls = [tile for tile, word in zip(inner, chunk, strict=True) if word < WALL_WORDS]
         used += len(inner)
     else:
@@ -186,9 +191,7 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
         drawn = draws.below_many(100, len(inner))
         walls = [tile for tile, draw in zip(inner, drawn, strict=True) if draw < WALL_PERCENT]
         used = draws.used
-    wall_bits = 0
-    for tile in walls:
-        wall_bits |= 1 << tile
+    wall_bits = sum(map(_BITS.__getitem__, walls))
 
     # 2. Border walls: 4 or 8 picks among the candidates, while there are any (a single one is taken without a draw).
     candidates = list(grid.free_border(start, end, wall_bits))
@@ -197,13 +200,13 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
         draws.read_ahead()
     count = BORDER_WALL_COUNTS[words[used] * len(BORDER_WALL_COUNTS) >> 32]  # (a range of 2 never redraws)
     used += 1
-    for _ in range(min(count, len(candidates))):
-        choices = len(candidates)
+    left = len(candidates)
+    for choices in range(left, left - min(count, left), -1):  # candidates left before each pick
         index = 0
         if choices > 1:
             product = words[used] * choices
             used += 1
-            if product & (_WORD - 1) < _WORD % choices:  # numpy draws again
+            if product & 0xFFFFFFFF < _REDRAWN_BELOW[choices]:  # numpy draws again
                 draws.used = used - 1
                 index = draws.below(choices)
                 used = draws.used
