@@ -193,6 +193,18 @@ class SpriteSheet:
             sub = (slice(r0 - top, r1 - top), slice(3 * (c0 - left), 3 * (c1 - left)))
             np.copyto(frame[r0:r1, 3 * c0 : 3 * c1], self._rgb_list[which][sub], where=self._mask_list[which][sub])
 
+    def paste_inside(
+        self, frames: np.ndarray, slots: np.ndarray, rows: np.ndarray, cols: np.ndarray, which: np.ndarray
+    ) -> None:
+        """:meth:`paste` of many sprites whose windows the caller knows to lie inside the frames: one windowed
+        composite, without the bounds test and the clipped fallback."""
+        windows = self._window_view(frames)
+        top, left = rows + self.top, cols + self.left
+        patch = windows[slots, top, left]
+        patch &= self.keep[which]
+        patch |= self.ink[which]
+        windows[slots, top, left] = patch
+
     def paste(
         self, frames: np.ndarray, slots: np.ndarray, rows: np.ndarray, cols: np.ndarray, which: np.ndarray
     ) -> None:

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+from itertools import chain
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from envs.core import BatchedCore, Index
-from envs.drawing import SCREEN, SpriteScatter, agent_sprites, blend, round_half_away
+from envs.drawing import SCREEN, SpriteScatter, SpriteSheet, agent_sprites, blend, round_half_away
 from envs.mystery_path.canvas import Canvas, fall_off_cross
 from envs.mystery_path.endless import (
     BACKGROUND_EDGE,
@@ -17,6 +18,7 @@ from envs.mystery_path.endless import (
     BAND_WIDTH,
     BLACK_FLOOR,
     DEBUG_PATH_ALPHA,
+    DIRECTION_OF_STEP,
     DIRECTIONS,
     EAST,
     INITIAL_SEGMENTS,
@@ -26,15 +28,15 @@ from envs.mystery_path.endless import (
     SEGMENT_COLUMNS,
     STAMINA_BAR_WIDTH,
     STAMINA_BARS,
-    STEP_DIRECTIONS,
     TILE_BYTE_OFFSETS,
     TILE_EDGE_BYTES,
     TILE_MIDDLE_BYTES,
     WEST,
     ice_background,
     walk_start,
+    walk_starts,
 )
-from envs.mystery_path.generator import draw_path, generate_path
+from envs.mystery_path.generator import draw_level, generate_path, level_grid, skip_level
 from envs.mystery_path.level import (
     AFTER_VISIT,
     ENDLESS_ACTIONS,
@@ -62,6 +64,14 @@ from envs.mystery_path.options import option_specs
 from envs.rng import BoundedDraws
 
 SCALAR_SLOTS = 2  # up to this many slots per step are stepped one by one (see MysteryPathCore._step)
+BATCHED_WALKS = 4  # a reset of this many endless slots computes their past-path starts with array operations
+SEGMENT_GRID = level_grid(GRID, GRID)  # an endless segment's tables; its tiles are indexed 7 * x + y
+# 64-bit outputs (two words each) read ahead at once: for a segment that is built, the most words it can use (its
+# start and goal rows, its walls and the longest search, see generator.draw_path), so its search needs no second
+# read; for a segment that is skipped, a little more than most use (66 words on average, 89 at most in 2000 levels).
+LEVEL_OUTPUTS = (2 + SEGMENT_GRID.level_words + 1) // 2
+SKIPPED_OUTPUTS = 40
+STEP_LIST = DIRECTION_OF_STEP.tolist()  # the same as Python ints
 
 
 class MysteryPathCore(BatchedCore):
@@ -99,6 +109,11 @@ class MysteryPathCore(BatchedCore):
         self.reward_table = np.zeros((n, 4), dtype=np.float64)  # reward of a step, by what the agent stepped on
         # Drawing.
         self.agents = SpriteScatter()
+        # Endless: the agent sprites of each scale as a sheet (by the id of their first sprite in `agents`), and the
+        # sheet of the one scale that every slot uses, if they do: the agents are then pasted through it (see _draw;
+        # endless agents stay in one screen column, away from the edges, where a sheet's windows are cheapest).
+        self.agent_sheets: dict[int, SpriteSheet] = {}
+        self.agent_sheet: tuple[SpriteSheet, int] | None = None  # (sheet, id of its first sprite in `agents`)
         self.crosses = SpriteScatter()
         self.cross_id = self.crosses.add((fall_off_cross(),))
         self.sprite0 = np.zeros(n, dtype=np.int64)  # sprite id of heading 0 at the slot's agent scale
@@ -137,7 +152,6 @@ class MysteryPathCore(BatchedCore):
         self.segment_ends: list[list[int]] = [[] for _ in range(n)]  # chain length after each segment
         self.walks_until = np.zeros(n, dtype=np.int64)  # walk_start is known for the chain tiles before this
         self.prepare_at = np.zeros(n, dtype=np.int64)  # x pixel of the next segment (see _enter_segment)
-        self.last_goal_y = np.zeros(n, dtype=np.int64)
         self.current_node = np.zeros(n, dtype=np.int64)
         self.draw_from = np.zeros(n, dtype=np.int64)  # past path: chain tiles draw_from .. current_node - 1
         self.ground_truth = np.zeros(n, dtype=np.int64)  # index into DIRECTIONS
@@ -154,7 +168,7 @@ class MysteryPathCore(BatchedCore):
         self.show_past_path = np.zeros(n, dtype=bool)
         self.show_background = np.zeros(n, dtype=bool)
         self.show_stamina = np.zeros(n, dtype=bool)
-        self.first_frames: dict[tuple, np.ndarray] = {}  # see _draw_first_frame
+        self.first_frames: dict[tuple, np.ndarray] = {}  # see _draw_first_frames
 
     # ------------------------------------------------------------------------------------------- reset
     def _reset_slots(self, slots: list[int], rngs: list[np.random.Generator], opts: dict[str, Any]) -> None:
@@ -165,6 +179,11 @@ class MysteryPathCore(BatchedCore):
         radius = int(25 * scale)
         at = slots[0] if len(slots) == 1 else np.array(slots)  # one slot: scalar writes are cheaper
         self.sprite0[at] = first
+        if self.endless:
+            sheet = self.agent_sheets.get(first)
+            if sheet is None:
+                sheet = self.agent_sheets[first] = SpriteSheet(agent_sprites(scale), 0, 0)
+            self.agent_sheet = (sheet, first) if self.num_envs == 1 or (self.sprite0 == first).all() else None
         self.half[at] = self.agents.sprites[first].width // 2
         if not self.grid:
             self.velocity[at] = velocities(self.endless, float(opts["agent_speed"]))
@@ -248,74 +267,144 @@ class MysteryPathCore(BatchedCore):
         # The agent is always drawn at the same screen column: its start column (the path starts in column 0)
         # minus the camera offset.
         self.agent_screen_left[at] = int(radius - self.half[slots[0]] - camera_offset)
+        # The levels are drawn slot by slot (each from its own generator, in the reference's order); the arrays of
+        # all the slots are then written together: a numpy call costs microseconds whatever its size.
         for k, rng in zip(slots, rngs, strict=True):
-            # One block of draws for the level (a few dozen words), and before it, if the generator continues, the
+            # One block of words for the level (a few dozen words), and before it, if the generator continues, the
             # draws of the segments that the reference built in the last episode and this slot did not.
             draws = BoundedDraws(rng)
-            draws.read_ahead()
             if self.segment_rng[k] is rng:
+                skipped = int(self.reference_segments[k]) - len(self.segment_ends[k])
+                draws.read_ahead(SKIPPED_OUTPUTS * skipped + LEVEL_OUTPUTS)
                 self._skip_segments(k, draws)
+            else:
+                draws.read_ahead(LEVEL_OUTPUTS)
             self.segment_rng[k] = rng
-            self.reference_segments[k] = INITIAL_SEGMENTS
             self.chain_lists[k] = ([], [])
             self.segment_ends[k] = []
-            self.num_segments[k] = 0
-            self.walks_until[k] = 0
-            self.tile_node[k] = -1
             self._add_segment(k, draws)
             draws.close()
-            self._enter_segment(k, 0)
-            self.flags[k, 0] = REFILL  # the very first tile pays nothing
-            self.ground_truth[k] = self.direction[k, 0]  # never west: the first tile is in column 0
-            self.return_pos[k] = self.pos[k] = (radius, self.chain_lists[k][1][0] * TILE + radius)
             self.fall_off_tiles[k] = set()
-            self._draw_first_frame(k)
-
-    def _draw_first_frame(self, k: int) -> None:
-        """Draw the first endless frame of slot ``k``: it depends only on the agent's start row and a few options, so
-        each is drawn once (by :meth:`_draw_slot`) and copied afterwards."""
-        key = (
-            int(self.sprite0[k]) + int(self.heading[k]) // 45,
-            int(self.pos[k, 1] - self.half[k]),
-            int(self.agent_screen_left[k]),
-            bool(self.show_background[k]),
-            bool(self.show_stamina[k]),
-        )
-        frame = self.first_frames.get(key)
-        if frame is None:
-            self._draw_slot(k)
-            self.first_frames[key] = self.canvas.view[k].copy()
+        self.reference_segments[at] = INITIAL_SEGMENTS
+        self.num_segments[at] = 1
+        self.tile_node[at] = -1
+        ends = [self.segment_ends[k][0] for k in slots]
+        x, nodes = self._store_chains(slots, [0] * len(slots))
+        self.flags[at, 0] = REFILL  # the very first tile pays nothing
+        self.ground_truth[at] = self.direction[at, 0]  # never west: the first tile is in column 0
+        # The agent enters the first segment: its past-path starts (see _enter_segment).
+        if len(slots) < BATCHED_WALKS:
+            for k in slots:
+                self._store_walks(k, 0, self.segment_ends[k][0])
         else:
-            self.canvas.view[k] = frame
+            self._store_first_walks(slots, ends, x, nodes, opts)
+        self.walks_until[at] = ends[0] if len(slots) == 1 else ends
+        self.prepare_at[at] = SEGMENT_COLUMNS * TILE
+        start_y = [self.chain_lists[k][1][0] for k in slots]
+        y = (start_y[0] if len(slots) == 1 else np.array(start_y)) * TILE + radius
+        self.pos[at, 0] = self.return_pos[at, 0] = radius
+        self.pos[at, 1] = self.return_pos[at, 1] = y
+        self._draw_first_frames(slots, start_y)
+
+    def _draw_first_frames(self, slots: list[int], start_y: list[int]) -> None:
+        """Draw the first endless frames of ``slots`` (reset together, so with the same options): a first frame
+        depends only on the agent's start row and a few options, so each is drawn once (by :meth:`_draw_slot`) and
+        copied afterwards."""
+        k = slots[0]
+        sprite, offset = int(self.sprite0[k]) + int(self.heading[k]) // 45, int(self.pos[k, 0] - self.half[k])
+        options = (int(self.agent_screen_left[k]), bool(self.show_background[k]), bool(self.show_stamina[k]))
+        rows: dict[int, list[int]] = {start_y[0]: slots} if len(slots) == 1 else {}
+        for k, row in zip(slots, start_y, strict=True) if len(slots) > 1 else ():
+            rows.setdefault(row, []).append(k)
+        for row, same in rows.items():
+            key = (sprite, row * TILE + offset, *options)  # the sprite and its top row (x = radius = y offset)
+            frame = self.first_frames.get(key)
+            if frame is None:
+                self._draw_slot(same[0])
+                frame = self.first_frames[key] = self.canvas.view[same[0]].copy()
+            self.canvas.view[same[0] if len(same) == 1 else same] = frame
 
     def _add_segment(self, k: int, draws: BoundedDraws) -> None:
-        """Append one endless segment (a 7x7 level from column 0 to column 6) and its transition tile, drawn from
-        ``draws`` (which the caller closes)."""
-        segment = int(self.num_segments[k])
-        start_y = draws.below(GRID) if segment == 0 else int(self.last_goal_y[k])
-        goal_y = draws.below(GRID)
-        path, _ = draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
-        shift = segment * SEGMENT_COLUMNS
+        """Draw the next endless segment of slot ``k`` (a 7x7 level from column 0 to column 6) from ``draws`` (which
+        the caller closes) and append its tiles and its transition tile to the chain lists; the caller writes them
+        into the arrays (:meth:`_store_chains`)."""
         xs, ys = self.chain_lists[k]
-        begin = len(xs)
+        ends = self.segment_ends[k]
+        segment = len(ends)
+        start_y = draws.below(GRID) if segment == 0 else ys[-1]  # the last transition tile's row
+        goal_y = draws.below(GRID)
+        path, _ = draw_level(draws, SEGMENT_GRID, start_y, (GRID - 1) * GRID + goal_y)  # (0, start_y) -> (6, goal_y)
+        shift = segment * SEGMENT_COLUMNS
         xs += [t // GRID + shift for t in path]
         xs.append(shift + GRID)  # the transition tile
         ys += [t % GRID for t in path]
         ys.append(goal_y)
-        end = len(xs)
-        self._reserve(end, (segment + 2) * SEGMENT_COLUMNS)
-        self.chain_x[k, begin:end] = xs[begin:]
-        self.chain_y[k, begin:end] = ys[begin:]
-        # Path tiles are 4-neighbours (index steps of +-GRID or +-1); the goal's transition tile is east of it, and
-        # the next segment starts east of the transition tile.
-        steps = [b - a for a, b in zip(path, path[1:], strict=False)]
-        self.direction[k, begin:end] = [STEP_DIRECTIONS[d] for d in steps] + [EAST, EAST]
-        self.flags[k, begin:end] = NEW_TILE | REFILL
-        where = [x * (GRID + 2) + y + 1 for x, y in zip(xs[begin:], ys[begin:], strict=True)]
-        self.tile_node[k].put(where, range(begin, end))  # tile_node[k, x, y + 1] = chain index
-        self.segment_ends[k].append(end)
-        self.num_segments[k] = segment + 1
-        self.last_goal_y[k] = goal_y
+        ends.append(len(xs))
+
+    def _store_chains(self, slots: list[int], begins: list[int]) -> tuple[Any, Any]:
+        """Write the chain tiles from ``begins[i]`` on of each slot of ``slots`` into the arrays: columns, rows,
+        directions, flags (fresh) and the tile -> chain index map. Returns the written tiles' columns and chain
+        indices, slot after slot.
+
+        A tile's direction follows from the step to the next chain tile: path tiles are 4-neighbours, a goal's
+        transition tile lies east of it and the next segment starts east of the transition tile; the last tile
+        written (a transition tile) points east too.
+        """
+        if len(slots) == 1:  # the same with Python lists (a dozen tiles: cheaper than numpy calls)
+            k, begin = slots[0], begins[0]
+            xs, ys = self.chain_lists[k]
+            end = len(xs)
+            self._reserve(end, (len(self.segment_ends[k]) + 1) * SEGMENT_COLUMNS)
+            x, y = xs[begin:], ys[begin:]
+            self.chain_x[k, begin:end] = x
+            self.chain_y[k, begin:end] = y
+            steps = zip(x, x[1:], y, y[1:], strict=False)
+            self.direction[k, begin:end] = [STEP_LIST[2 * (b - a) + d - c + 2] for a, b, c, d in steps] + [EAST]
+            self.flags[k, begin:end] = NEW_TILE | REFILL
+            self.tile_node[k].put([a * (GRID + 2) + b + 1 for a, b in zip(x, y, strict=True)], range(begin, end))
+            return x, range(begin, end)
+        lists = [self.chain_lists[k] for k in slots]
+        ends = [len(xs) for xs, _ in lists]
+        self._reserve(max(ends), (max(len(self.segment_ends[k]) for k in slots) + 1) * SEGMENT_COLUMNS)
+        total = sum(ends) - sum(begins)
+        x = np.fromiter(chain.from_iterable(xs[b:] for (xs, _), b in zip(lists, begins, strict=True)), int, total)
+        y = np.fromiter(chain.from_iterable(ys[b:] for (_, ys), b in zip(lists, begins, strict=True)), int, total)
+        counts = np.array(ends) - begins
+        rows = np.repeat(slots, counts)
+        last = np.cumsum(counts) - 1  # each slot's last tile in x and y
+        nodes = np.arange(len(x)) + np.repeat(np.array(begins) - (last + 1 - counts), counts)  # chain indices
+        step = np.zeros(len(x), dtype=np.int64)
+        step[:-1] = 2 * (x[1:] - x[:-1]) + (y[1:] - y[:-1])
+        step[last] = 0  # no step: east
+        self.chain_x[rows, nodes] = x
+        self.chain_y[rows, nodes] = y
+        self.direction[rows, nodes] = DIRECTION_OF_STEP[step + 2]
+        self.flags[rows, nodes] = NEW_TILE | REFILL
+        self.tile_node[rows, x, y + 1] = nodes  # tile_node[k, x, y + 1] = chain index
+        return x, nodes
+
+    def _store_walks(self, k: int, begin: int, end: int) -> None:
+        """Where the past path starts behind an agent on each chain tile begin..end - 1 of slot ``k``."""
+        if self.show_past_path[k]:
+            xs, depth = self.chain_lists[k][0], int(self.depth[k])
+            self.walk_start[k, begin:end] = [walk_start(xs, i, xs[i] - 1, depth) for i in range(begin, end)]
+        else:
+            self.walk_start[k, begin:end] = range(begin, end)
+
+    def _store_first_walks(
+        self, slots: list[int], ends: list[int], x: np.ndarray, cols: np.ndarray, opts: dict[str, Any]
+    ) -> None:
+        """:meth:`_store_walks` of the first segment of many slots at once (``x`` and ``cols``: their chain tiles'
+        columns and chain indices, slot after slot), with :func:`walk_starts`."""
+        counts = np.array(ends)
+        rows = np.repeat(np.arange(len(slots)), counts)
+        if opts["show_past_path"]:
+            columns = np.zeros((len(slots), int(counts.max())), dtype=np.int64)
+            columns[rows, cols] = x
+            starts = walk_starts(columns, int(opts["camera_offset_scale"]))[rows, cols]
+        else:
+            starts = cols
+        self.walk_start[np.array(slots)[rows], cols] = starts
 
     def _enter_segment(self, k: int, segment: int) -> None:
         """Prepare segment ``segment`` for an agent entering it, and compute where the past path starts for each of
@@ -333,31 +422,32 @@ class MysteryPathCore(BatchedCore):
             self._catch_up(k)
         begin, end = int(self.walks_until[k]), self.segment_ends[k][segment]
         if end > begin:
-            if self.show_past_path[k]:
-                xs, depth = self.chain_lists[k][0], int(self.depth[k])
-                self.walk_start[k, begin:end] = [walk_start(xs, i, xs[i] - 1, depth) for i in range(begin, end)]
-            else:
-                self.walk_start[k, begin:end] = range(begin, end)
+            self._store_walks(k, begin, end)
             self.walks_until[k] = end
         self.prepare_at[k] = (segment + 1) * SEGMENT_COLUMNS * TILE
 
     def _catch_up(self, k: int) -> None:
         """Build the segments that the reference has built by now but this slot has not yet (see _enter_segment)."""
-        if self.num_segments[k] < self.reference_segments[k]:
+        ends = self.segment_ends[k]
+        if len(ends) < self.reference_segments[k]:
+            begin = ends[-1]
             draws = BoundedDraws(self.segment_rng[k])
-            draws.read_ahead()
-            while self.num_segments[k] < self.reference_segments[k]:
+            draws.read_ahead(LEVEL_OUTPUTS * (int(self.reference_segments[k]) - len(ends)))
+            while len(ends) < self.reference_segments[k]:
                 self._add_segment(k, draws)
             draws.close()
+            self._store_chains([k], [begin])
+            self.num_segments[k] = len(ends)
 
     def _skip_segments(self, k: int, draws: BoundedDraws) -> None:
         """Make the draws of the segments that the reference has built by now but this slot has not, without
         building them: at a reset that continues the generator, the finished episode's segments are never seen."""
-        goal_y = int(self.last_goal_y[k])
-        for segment in range(int(self.num_segments[k]), int(self.reference_segments[k])):
+        ys = self.chain_lists[k][1]
+        goal_y = ys[-1] if ys else 0
+        for segment in range(len(self.segment_ends[k]), int(self.reference_segments[k])):
             start_y = draws.below(GRID) if segment == 0 else goal_y
             goal_y = draws.below(GRID)
-            draw_path(draws, GRID, GRID, (0, start_y), (GRID - 1, goal_y))
+            skip_level(draws, SEGMENT_GRID, start_y, (GRID - 1) * GRID + goal_y)
 
     def path_tiles(self, k: int) -> tuple[list[int], list[int]]:
         """Endless variant: (x list, y list) of every path tile generated so far in slot ``k``, origin first."""
@@ -535,17 +625,25 @@ class MysteryPathCore(BatchedCore):
 
     def _step_endless(self, idx: Index, slots: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         back = self.off_path[idx]  # fell off last step: back to the first tile, camera reset, action ignored
-        code = np.where(back, 0, actions)
-        velocity = self.velocity[slots, code]
-        pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
-        pos += velocity
+        # The camera follows the agent horizontally; the background scrolls the other way and wraps.
+        if back.any():
+            code = np.where(back, 0, actions)
+            velocity = self.velocity[slots, code]
+            pos = np.where(back[:, None], self.return_pos[idx], self.pos[idx])
+            pos += velocity
+            vx = velocity[:, 0]
+            self.camera_x[idx] = np.where(back, self.camera_offset[idx], self.camera_x[idx] + vx)
+            scroll = np.where(back, 0.0, self.bg_scroll[idx] - vx)
+        else:  # the same without the selections (most steps: no slot fell off in the last one)
+            code = actions
+            velocity = self.velocity[slots, code]
+            pos = self.pos[idx] + velocity
+            vx = velocity[:, 0]
+            self.camera_x[idx] += vx
+            scroll = self.bg_scroll[idx] - vx
         self.pos[idx] = pos
         turn = ENDLESS_HEADINGS[code]
         self.heading[idx] = np.where(turn < 0, self.heading[idx], turn)
-        # The camera follows the agent horizontally; the background scrolls the other way and wraps.
-        vx = velocity[:, 0]
-        self.camera_x[idx] = np.where(back, self.camera_offset[idx], self.camera_x[idx] + vx)
-        scroll = np.where(back, 0.0, self.bg_scroll[idx] - vx)
         wrap = np.abs(scroll) >= TILE
         if wrap.any():
             scroll = np.where(wrap, np.abs(scroll) % np.where(vx != 0, np.abs(vx), 1) * np.sign(scroll), scroll)
@@ -636,8 +734,12 @@ class MysteryPathCore(BatchedCore):
         else:
             self.canvas.view[idx] = self.background[idx]
             left = pos[:, 0] - self.half[idx]
-        sprite = self.sprite0[idx] + self.heading[idx] // 45
-        self.canvas.paste(self.agents, slots, sprite, top, left, may_leave_screen=self.endless)
+        if self.agent_sheet is not None:
+            sheet, first = self.agent_sheet
+            self.canvas.paste_sheet(sheet, self.agents, first, slots, self.heading[idx] // 45, top, left, self.endless)
+        else:
+            sprite = self.sprite0[idx] + self.heading[idx] // 45
+            self.canvas.paste(self.agents, slots, sprite, top, left, may_leave_screen=self.endless)
         if self.endless:
             bar = self.show_stamina[idx]
             if bar.any():
@@ -669,7 +771,6 @@ class MysteryPathCore(BatchedCore):
         Black frames are cleared in one fill; then only the bands that hold something are written: every band of
         an ice floor, and the bands of a black floor that hold past-path tiles."""
         ice = self.show_background[idx]
-        phase = np.where(ice, (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
         if isinstance(idx, slice) and not ice.any():
             self.canvas.view.fill(0)
         elif not ice.all():
@@ -687,6 +788,7 @@ class MysteryPathCore(BatchedCore):
         band_of = np.flatnonzero(drawn)
         if len(band_of) == 0:
             return
+        phase = np.where(ice, (-self.bg_scroll[idx]).astype(np.int64) % TILE, BLACK_FLOOR)
         band_slots = band_of // GRID
         edge = np.empty((len(band_of), BAND_WIDTH, 3), dtype=np.uint8)
         middle = np.empty((len(band_of), BAND_WIDTH, 3), dtype=np.uint8)

@@ -24,7 +24,9 @@ NEW_TILE, REFILL = 1, 2
 # Endless ground truth: the direction from the current tile to the next path tile.
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=np.int64)  # east, north, south
 EAST, NORTH, SOUTH, WEST = 0, 1, 2, -1
-STEP_DIRECTIONS = {GRID: EAST, -1: NORTH, 1: SOUTH, -GRID: WEST}  # by the step between tile indices 7 * x + y
+# By the step (dx, dy) to the next chain tile, at index 2 * dx + dy + 2 (index 2, no step: the last tile of a chain,
+# a transition tile, points east).
+DIRECTION_OF_STEP = np.array([WEST, NORTH, EAST, SOUTH, EAST], dtype=np.int64)
 
 # The endless floor is drawn band by band: a band is one tile row of the screen, and all its pixel rows equal either
 # its "edge" row (first and last row of a tile) or its "middle" row. Bands are padded by one tile on both sides so
@@ -90,3 +92,28 @@ def walk_start(xs: list[int], node: int, column: int, depth: int) -> int:
     while i > 0 and xs[i] > last:
         i -= 1
     return max(i, 0)
+
+
+def walk_starts(columns: np.ndarray, depth: int) -> np.ndarray:
+    """:func:`walk_start` of every tile of several chains at once: ``columns[s, i]`` is the column of tile i of
+    chain s (chains shorter than the array's width are padded with anything); returns the first chain tile drawn
+    behind an agent on each tile (its column + 1, so ``column = columns[s, i] - 1``).
+
+    The walk from tile i stops at the last tile before i, other than the first, whose column is at most ``max(0,
+    column - depth)``, else at the first tile; a tile in column 0 draws nothing behind it (the tile itself). The
+    last such tile is found by an argmax over the tiles in reverse order, with the first tile always allowed (the
+    default): numpy's max along a short last axis costs several times as much.
+    """
+    length = columns.shape[1]
+    last = np.maximum(columns - 1 - depth, 0)
+    behind = (columns[:, None, ::-1] <= last[:, :, None]) & _tiles_before(length)
+    starts = length - 1 - behind.argmax(axis=2)
+    return np.where(columns == 0, np.arange(length), starts)
+
+
+@cache
+def _tiles_before(length: int) -> np.ndarray:
+    """[i, r]: tile j = length - 1 - r may end the walk back from tile i (1 <= j < i), or is the first (j = 0)."""
+    tiles = np.arange(length)
+    j = tiles[::-1]
+    return ((j[None, :] >= 1) & (j[None, :] < tiles[:, None])) | (j[None, :] == 0)

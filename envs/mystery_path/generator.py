@@ -26,7 +26,8 @@ the generator it is given, in a fixed order (so a seed always gives the same lev
    is a 4-neighbour of the next one. Over 2000 levels its length (origin and goal included) was 7 to 15 tiles,
    10 on average, and it may double back on itself.
 
-The search never failed on a 7 x 7 grid; if no path exists it raises ``RuntimeError``.
+The search never failed on a 7 x 7 grid; if no path exists it raises ``RuntimeError``. :func:`skip_path` makes the
+draws of a level without building its path (for levels that are never played, see the endless core).
 """
 
 from __future__ import annotations
@@ -60,6 +61,11 @@ def rejected_words(high: int) -> frozenset[int]:
     return frozenset((r // g * inverse) % modulus + j * modulus for r in range(0, threshold, g) for j in range(g))
 
 
+_REJECTED_WALL_WORDS = rejected_words(100)
+_BITS = tuple(1 << tile for tile in range(64))  # bit of each tile index (grids up to 64 tiles)
+_REDRAWN_BELOW = (0, *(_WORD % choices for choices in range(1, 65)))  # integers(0, n) draws again below this
+
+
 @dataclass(frozen=True)
 class MysteryPathLayout:
     """One generated level: the path (origin first, goal last) and the walls (inner ones first, then border ones)."""
@@ -81,7 +87,11 @@ class _Grid:
     border: tuple[int, ...]  # border tiles, column by column
     distance: tuple[tuple[float, ...], ...]  # distance[goal][tile]: straight-line distance between the two
     tiles: tuple[Tile, ...]  # (x, y) of each index
+    touching: int  # bit mask of the inner tiles that surround a border tile
+    edges: int  # pairs of 4-neighbours: the most words a search can use (see draw_path)
+    level_words: int  # the most words a level uses (unless numpy draws again): walls, count, picks, search
     _candidates: dict[tuple[int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
+    _free: dict[tuple[int, int, int], tuple[int, ...]] = field(default_factory=dict, compare=False, hash=False)
 
     def border_candidates(self, start: int, end: int) -> tuple[int, ...]:
         """Border tiles that are neither ``start`` nor ``end`` nor a 4-neighbour of either (kept once computed)."""
@@ -89,6 +99,20 @@ class _Grid:
         if found is None:
             excluded = self.near[start] | self.near[end]
             found = self._candidates[start, end] = tuple(t for t in self.border if not (excluded >> t) & 1)
+        return found
+
+    def free_border(self, start: int, end: int, wall_bits: int) -> tuple[int, ...]:
+        """The :meth:`border_candidates` without an inner wall (``wall_bits``) among their surrounding tiles.
+
+        Kept once computed: only the inner walls in ``touching`` (7 of 16 tiles on a 7x7 grid) decide, so there are
+        few distinct answers, and a lookup is cheaper than testing every candidate.
+        """
+        key = (start, end, wall_bits & self.touching)
+        found = self._free.get(key)
+        if found is None:
+            surrounding = self.surrounding
+            candidates = self.border_candidates(start, end)
+            found = self._free[key] = tuple(t for t in candidates if not surrounding[t] & wall_bits)
         return found
 
 
@@ -111,7 +135,23 @@ def _grid(width: int, height: int) -> _Grid:
     inner = tuple(index(x, y) for x in range(1, width - 2) for y in range(1, height - 2))
     border = tuple(index(x, y) for x, y in tiles if x in (0, width - 1) or y in (0, height - 1))
     distance = tuple(tuple(math.sqrt((x - gx) ** 2 + (y - gy) ** 2) for x, y in tiles) for gx, gy in tiles)
-    return _Grid(width, height, tuple(neighbours), tuple(near), tuple(surrounding), inner, border, distance, tiles)
+    touching = sum(1 << t for t in inner if any(surrounding[b] >> t & 1 for b in border))
+    edges = sum(len(four) for four in neighbours) // 2
+    level_words = len(inner) + 1 + max(BORDER_WALL_COUNTS) + edges
+    return _Grid(
+        width,
+        height,
+        tuple(neighbours),
+        tuple(near),
+        tuple(surrounding),
+        inner,
+        border,
+        distance,
+        tiles,
+        touching,
+        edges,
+        level_words,
+    )
 
 
 def generate_path(rng: np.random.Generator, width: int, height: int, origin: Tile, goal: Tile) -> MysteryPathLayout:
@@ -119,10 +159,12 @@ def generate_path(rng: np.random.Generator, width: int, height: int, origin: Til
 
     ``origin`` and ``goal`` should lie on the border; ``rng`` is advanced exactly as memory-gym 1.0.2 advances it.
     """
+    grid = _grid(int(width), int(height))
     draws = BoundedDraws(rng)
+    draws.read_ahead((grid.level_words + 1) // 2)  # one read for the whole level
     path, walls = draw_path(draws, width, height, origin, goal)
     draws.close()
-    tiles = _grid(int(width), int(height)).tiles
+    tiles = grid.tiles
     return MysteryPathLayout(path=tuple(tiles[t] for t in path), walls=tuple(tiles[t] for t in walls))
 
 
@@ -141,7 +183,7 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
         draws.read_ahead()
     used = draws.used
     chunk = words[used : used + len(inner)]
-    if rejected_words(100).isdisjoint(chunk):
+    if _REJECTED_WALL_WORDS.isdisjoint(chunk):
         walls = [tile for tile, word in zip(inner, chunk, strict=True) if word < WALL_WORDS]
         used += len(inner)
     else:
@@ -149,23 +191,22 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
         drawn = draws.below_many(100, len(inner))
         walls = [tile for tile, draw in zip(inner, drawn, strict=True) if draw < WALL_PERCENT]
         used = draws.used
-    wall_bits = sum(1 << tile for tile in walls)
+    wall_bits = sum(map(_BITS.__getitem__, walls))
 
     # 2. Border walls: 4 or 8 picks among the candidates, while there are any (a single one is taken without a draw).
-    surrounding = grid.surrounding
-    candidates = [t for t in grid.border_candidates(start, end) if not surrounding[t] & wall_bits]
+    candidates = list(grid.free_border(start, end, wall_bits))
     if used + 9 > len(words):
         draws.used = used
         draws.read_ahead()
     count = BORDER_WALL_COUNTS[words[used] * len(BORDER_WALL_COUNTS) >> 32]  # (a range of 2 never redraws)
     used += 1
-    for _ in range(min(count, len(candidates))):
-        choices = len(candidates)
+    left = len(candidates)
+    for choices in range(left, left - min(count, left), -1):  # candidates left before each pick
         index = 0
         if choices > 1:
             product = words[used] * choices
             used += 1
-            if product & (_WORD - 1) < _WORD % choices:  # numpy draws again
+            if product & 0xFFFFFFFF < _REDRAWN_BELOW[choices]:  # numpy draws again
                 draws.used = used - 1
                 index = draws.below(choices)
                 used = draws.used
@@ -176,6 +217,11 @@ def draw_walls(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> list[i
     return walls
 
 
+def level_grid(width: int, height: int) -> _Grid:
+    """The tables of a ``width`` x ``height`` grid (built once), for :func:`draw_level` and :func:`skip_level`."""
+    return _grid(int(width), int(height))
+
+
 def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: Tile) -> tuple[list[int], list[int]]:
     """:func:`generate_path` on tile indices ``x * height + y``: (path origin first, walls), drawn from ``draws``.
 
@@ -184,8 +230,12 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
     grid = _grid(int(width), int(height))
     start = int(origin[0]) * grid.height + int(origin[1])
     end = int(goal[0]) * grid.height + int(goal[1])
-    n = grid.width * grid.height
+    return draw_level(draws, grid, start, end)
 
+
+def draw_level(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> tuple[list[int], list[int]]:
+    """:func:`draw_path` from tile index ``start`` to tile index ``end`` of ``grid`` (:func:`level_grid`)."""
+    n = grid.width * grid.height
     walls = draw_walls(draws, grid, start, end)
 
     # 3. Randomised best-first search. Tile states: 0 not seen, 1 open, 2 closed or wall. The open list is kept as
@@ -201,6 +251,11 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
     # The step costs integers(1, 9) are read inline from the 32-bit outputs: for a range of 8 numpy's method is
     # "the top 3 bits" and never redraws.
     assert COST_HIGH - COST_LOW == 8
+    # A word is used when an expanded tile examines a neighbour that is not closed; the neighbour, expanded later,
+    # finds the tile closed. So a search uses at most one word per pair of neighbours, and reading that many ahead
+    # once spares a test per expanded tile.
+    if draws.used + grid.edges > len(draws.words):
+        draws.read_ahead(max(BoundedDraws.BLOCK, (grid.edges + 1) // 2))
     words, used = draws.words, draws.used
     while open_tiles:
         head, pick = open_f[0], 0
@@ -213,9 +268,6 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
             break
         del open_tiles[pick], open_f[pick]
         state[current] = 2
-        if used + 4 > len(words):  # enough words for every neighbour
-            draws.used = used
-            draws.read_ahead()
         g_current = g[current] + COST_LOW
         for tile in neighbours[current]:
             seen = state[tile]
@@ -244,3 +296,58 @@ def draw_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: 
         tile = parent[tile]
     path.reverse()
     return path, walls
+
+
+def skip_path(draws: BoundedDraws, width: int, height: int, origin: Tile, goal: Tile) -> None:
+    """The draws of :func:`draw_path`, without its path: the walls, then the search without parents.
+
+    A continued endless generator must be advanced past levels that are never played. Which words the search uses
+    does not depend on the parents (a cheaper way to an open tile re-points its parent and nothing else), so their
+    bookkeeping is left out: about a tenth of the search. The loop is :func:`draw_path`'s otherwise (tests keep the
+    two in step).
+    """
+    grid = _grid(int(width), int(height))
+    start = int(origin[0]) * grid.height + int(origin[1])
+    end = int(goal[0]) * grid.height + int(goal[1])
+    skip_level(draws, grid, start, end)
+
+
+def skip_level(draws: BoundedDraws, grid: _Grid, start: int, end: int) -> None:
+    """:func:`skip_path` from tile index ``start`` to tile index ``end`` of ``grid`` (:func:`level_grid`)."""
+    n = grid.width * grid.height
+    state = [0] * n
+    for tile in draw_walls(draws, grid, start, end):
+        state[tile] = 2
+    neighbours, distance = grid.neighbours, grid.distance[end]
+    g = [0] * n
+    open_tiles, open_f = [start], [0.0]
+    state[start] = 1
+    if draws.used + grid.edges > len(draws.words):  # as in draw_path
+        draws.read_ahead(max(BoundedDraws.BLOCK, (grid.edges + 1) // 2))
+    words, used = draws.words, draws.used
+    while open_tiles:
+        head, pick = open_f[0], 0
+        for value in open_f:
+            if value < head:
+                pick = open_f.index(value)
+                break
+        current = open_tiles[pick]
+        if current == end:
+            break
+        del open_tiles[pick], open_f[pick]
+        state[current] = 2
+        g_current = g[current] + COST_LOW
+        for tile in neighbours[current]:
+            seen = state[tile]
+            if seen == 2:
+                continue
+            if not seen:  # an open tile's word is used and changes nothing else here
+                cost = g_current + (words[used] >> 29)
+                g[tile] = cost
+                state[tile] = 1
+                open_tiles.append(tile)
+                open_f.append(cost + distance[tile])
+            used += 1
+    else:
+        raise RuntimeError("No valid path found")
+    draws.used = used

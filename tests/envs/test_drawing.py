@@ -132,3 +132,24 @@ def test_sprite_paste_copies_exactly_the_opaque_pixels_that_land_on_the_frame(se
                     expected[top + i, left + j] = sprite.rgb[i, j]
             sprite.paste(frame, top, left)
             np.testing.assert_array_equal(frame, expected)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_sheet_paste_inside_matches_per_slot_pastes(seed: int) -> None:
+    """SpriteSheet.paste_inside (windows known to lie inside, one composite) pastes what Sprite.paste does (one
+    sprite per frame, as the batched cores paste them)."""
+    from envs.drawing import SpriteSheet
+
+    rng = np.random.default_rng(seed)
+    sprites = agent_sprites(0.25)
+    sheet = SpriteSheet(sprites, 3, 5)  # an anchor away from the corner
+    height, width, count = 40, 44, 30
+    frames = rng.integers(0, 256, (count + 2, height, width, 3), dtype=np.uint8)
+    slots, which = rng.permutation(count + 2)[:count], rng.integers(0, len(sprites), count)
+    rows = rng.integers(-sheet.top, height - sheet.height - sheet.top + 1, count)
+    cols = rng.integers(-sheet.left, width - sheet.width - sheet.left + 1, count)
+    expected = frames.copy()
+    for k, w, r, c in zip(slots, which, rows, cols, strict=True):
+        sprites[w].paste(expected[k], int(r) - 3, int(c) - 5)
+    sheet.paste_inside(frames.reshape(count + 2, height, -1), slots, rows, cols, which)
+    np.testing.assert_array_equal(frames, expected)

@@ -521,3 +521,81 @@ def test_a_reset_that_continues_the_generator_draws_but_does_not_build_the_last_
     env.reset()  # generator continued: the draws of two unbuilt segments come first
     assert built == [0] and core.num_segments[0] == 1
     assert list(zip(*core.path_tiles(0), strict=True)) == [t for seg in second for t in seg]
+
+
+def test_endless_resets_of_many_slots_equal_resets_one_by_one() -> None:
+    """Endless slots reset together (the arrays of all of them written at once, the past-path starts of many slots
+    computed by ``walk_starts``) equal one-slot cores, with seeds and with continued generators."""
+    options = [
+        {"max_steps": 40},
+        {"camera_offset_scale": 2.3, "agent_speed": 4.0, "max_steps": 55},
+        {"show_past_path": False, "max_steps": 30},
+    ]
+    singles, episodes = check_batched_equals_singles(
+        "Endless-MysteryPath-v0",
+        options,
+        160,
+        lambda rng, singles: _actions(singles[0].single_action_space, rng, singles),
+        n=15,
+    )
+    assert episodes >= 30
+    assert max(int(s.num_segments[0]) for s in singles) >= 3  # segments were generated during steps
+
+
+def test_walk_starts_of_many_chains_equal_walk_start() -> None:
+    from envs.mystery_path import walk_start, walk_starts
+
+    rng = np.random.default_rng(5)
+    for depth in (0, 1, 2, 5):
+        chains = []
+        for _ in range(40):  # chains that go east and sometimes back west, as paths may
+            steps = rng.choice([-1, 0, 0, 1, 1, 1], size=int(rng.integers(1, 30)))
+            chains.append(np.maximum(np.cumsum(np.concatenate([[0], steps])), 0).tolist())
+        columns = np.full((len(chains), max(map(len, chains))), 99)
+        for s, xs in enumerate(chains):
+            columns[s, : len(xs)] = xs
+        starts = walk_starts(columns, depth)
+        for s, xs in enumerate(chains):
+            assert starts[s, : len(xs)].tolist() == [walk_start(xs, i, xs[i] - 1, depth) for i in range(len(xs))]
+
+
+# agents away from the screen's edge, at the edge (their sheet windows reach past it), and both in one batch
+@pytest.mark.parametrize("options", [[{}], [{"camera_offset_scale": 0.0}], [{}, {"camera_offset_scale": 0.0}]])
+def test_endless_agents_of_one_scale_pasted_through_their_sheet_equal_single_environments(options: list) -> None:
+    """When every endless slot uses one agent scale, the batched frames paste the agents through a SpriteSheet
+    (windowed composite) instead of the pixel scatter of mixed scales: same frames as one-slot cores."""
+    core = envs.make_core("Endless-MysteryPath-v0", num_envs=8)
+    core.reset_slots(range(8), range(8), options[0])
+    assert core.agent_sheet is not None
+    core.reset_slot(3, seed=3, options={"agent_scale": 0.4})
+    assert core.agent_sheet is None
+    check_batched_equals_singles(
+        "Endless-MysteryPath-v0",
+        [{"max_steps": 45, **o} for o in options],
+        90,
+        lambda rng, singles: _actions(singles[0].single_action_space, rng, singles),
+        n=8,
+    )
+
+
+def test_endless_chains_stored_for_many_slots_equal_one_slot_at_a_time() -> None:
+    """_store_chains with array operations (several slots, any first tile) writes what the one-slot path writes."""
+    core = envs.make_core("Endless-MysteryPath-v0", num_envs=5)
+    core.reset_slots(range(5), range(5))
+    for k in range(5):  # longer chains: the reference's three segments (and more for two slots)
+        core.reference_segments[k] += k % 2
+        core._catch_up(k)
+    names = ("chain_x", "chain_y", "direction", "flags", "tile_node")
+    slots, begins = [0, 2, 3, 4], [3, 0, 11, 8]
+    written = {}
+    for many in (False, True):
+        for name in names:
+            getattr(core, name)[:] = 0
+        if many:
+            core._store_chains(slots, begins)
+        else:
+            for k, begin in zip(slots, begins, strict=True):
+                core._store_chains([k], [begin])
+        written[many] = [getattr(core, name).copy() for name in names]
+    for name, one, batch in zip(names, written[False], written[True], strict=True):
+        np.testing.assert_array_equal(batch, one, err_msg=name)

@@ -159,3 +159,36 @@ def test_walls_read_from_the_words_equal_one_draw_per_call_also_when_numpy_draws
         assert draw_walls(fast, _grid(GRID, GRID), start, end) == _walls_by_calls(slow, start, end)
         assert fast.used == slow.used
     assert rejected != "pick" or tested >= 10
+
+
+def test_free_border_tiles_kept_by_the_touching_inner_walls_equal_a_test_of_every_candidate() -> None:
+    from envs.mystery_path.generator import _grid
+
+    grid = _grid(GRID, GRID)
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        start, end = (int(t) for t in rng.choice(grid.border, size=2, replace=False))
+        walls = [t for t in grid.inner if rng.random() < 0.33]
+        bits = sum(1 << t for t in walls)
+        expected = tuple(t for t in grid.border_candidates(start, end) if not grid.surrounding[t] & bits)
+        assert grid.free_border(start, end, bits) == expected
+
+
+def test_skip_path_makes_the_draws_of_draw_path() -> None:
+    """The search without parents uses the same words, so the generator ends where a built level leaves it."""
+    from envs.mystery_path.generator import draw_path, skip_path
+    from envs.rng import BoundedDraws
+
+    rng = np.random.default_rng(8)
+    for seed in range(300):
+        origin, goal = (0, int(rng.integers(0, GRID))), (GRID - 1, int(rng.integers(0, GRID)))
+        if seed % 3 == 0:
+            origin, goal = (int(rng.integers(0, GRID)), GRID - 1), (int(rng.integers(0, GRID)), 0)
+        built, skipped = seeded_generator(seed), seeded_generator(seed)
+        for generator, make in ((built, draw_path), (skipped, skip_path)):
+            draws = BoundedDraws(generator)
+            draws.read_ahead(4)  # short blocks: the search reads ahead on the way
+            for _ in range(3):
+                make(draws, GRID, GRID, origin, goal)
+            draws.close()
+        assert built.bit_generator.state == skipped.bit_generator.state, seed
