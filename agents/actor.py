@@ -26,7 +26,7 @@ import torch
 from torch import Tensor
 
 from agents.config import Config
-from agents.models import OBSERVATION_KEYS, ActorCritic, choose_actions, observation_fields
+from agents.models import OBSERVATION_KEYS, ActorCritic, choose_actions, join_frames, observation_fields
 from envs.core import BatchedCore
 
 SeedSource = Callable[[int], list[int]]  # how many seeds -> that many episode seeds
@@ -184,8 +184,7 @@ class Actor:
         memory = self.memory
         inputs = {}
         for name, stack in memory.stacks.items():  # (B, k, ..., C) -> (B, ..., k C): the oldest frame first
-            moved = stack.movedim(1, -2)
-            inputs[name] = moved.reshape(*moved.shape[:-2], -1)
+            inputs[name] = join_frames(stack)
         model_inputs = self.model.inputs
         if "previous_action" in model_inputs:
             inputs["previous_action"] = memory.previous_action

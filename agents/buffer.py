@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from agents.models import InputField
+from agents.models import InputField, join_frames
 
 STACKED = ("image", "vector")  # the observation fields, stacked along their last (channel) axis
 
@@ -103,8 +103,7 @@ class RolloutBuffer:
         for name, tensor in self.inputs.items():
             if name in STACKED and k > 1:
                 rows = tensor.reshape(-1, *tensor.shape[2:]).index_select(0, stacked_index)
-                rows = rows.reshape(index.shape[0], k, *rows.shape[1:]).movedim(1, -2)
-                gathered[name] = rows.reshape(*rows.shape[:-2], -1)
+                gathered[name] = join_frames(rows.reshape(index.shape[0], k, *rows.shape[1:]))
             else:
                 gathered[name] = self.flat(tensor).index_select(0, index)
         return gathered

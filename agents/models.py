@@ -111,6 +111,17 @@ def model_inputs(
     return fields
 
 
+def join_frames(frames: Tensor) -> Tensor:
+    """(N, k, ..., C) frames, the oldest first -> (N, ..., k C): the stacked input of :func:`model_inputs`.
+
+    A concatenation along the channel axis: for multi-channel frames ~3x faster than moving the k axis and reshaping
+    (torch's strided copy handles a 3-byte innermost run badly); single-channel frames need no copy at all."""
+    if frames.shape[-1] == 1:
+        moved = frames.movedim(1, -2)
+        return moved.reshape(*moved.shape[:-2], -1)
+    return torch.cat(frames.unbind(1), dim=-1)
+
+
 def compute_dtype(weight: Tensor) -> torch.dtype:
     """The dtype a layer computes in: the autocast type when autocast is on, else its weights' own type."""
     device = weight.device.type
