@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from scripts import benchmark_training
 
 
@@ -13,17 +15,18 @@ def test_benchmark_writes_a_complete_record(tmp_path: Path) -> None:
     args = ["--env", "ProofOfMemory-v0", "--workers", "2", "--worker-steps", "16", "--epochs", "1"]
     args += ["--minibatches", "2", "--updates", "1", "--repeats", "1", "--precision", "fp32", "--threads", "1"]
     args += ["--methods", "gru,ppo,stack4", "--sb3", "no", "--out", str(out)]
+    ballast = np.ones(200_000_000)  # 1.6 GB resident in this process: a child must not report it as its own peak
     assert benchmark_training.main(args) == 0
+    del ballast
     record = json.loads(out.read_text())
     for how in ("median", "best"):
         summary = record["summary"][how]
         methods = summary["methods"]
         assert set(methods) == {"gru", "ppo", "stack4"}
         for row in methods.values():
-            assert row["end_to_end"] > 0 and 0 < row["rollout_share"] < 1 and row["peak_rss_mib"] > 50
+            assert row["end_to_end"] > 0 and 0 < row["rollout_share"] < 1 and 50 < row["peak_rss_mib"] < 1500
             assert row["helm_share"] == 0.0
-        gru = methods["gru"]
-        assert gru["bound"] > 0 and gru["end_to_end_over_bound"] == gru["end_to_end"] / gru["bound"]
+            assert row["bound"] > 0 and row["end_to_end_over_bound"] == row["end_to_end"] / row["bound"]
         assert methods["stack4"]["over_ppo"] == methods["stack4"]["end_to_end"] / methods["ppo"]["end_to_end"]
         assert methods["stack4"]["bytes_per_step"] > methods["ppo"]["bytes_per_step"]
         assert summary["sb3_recurrent_ppo_steps_per_s"] is None
