@@ -218,7 +218,11 @@ def final_figure(
             axes.barh(y, width, left=row["low"], height=0.6, color=colors[method], alpha=0.75)
             axes.vlines(row["iqm"], y - 0.3, y + 0.3, color="black", linewidth=2)
         axes.set_yticks(range(len(methods)), methods)
-        axes.margins(x=0.08)
+        if mine:  # bars pin the x limits at their ends (sticky edges), so margins would not show an interval at 0 or 1
+            low = min(row["low"] for row in mine.values())
+            high = max(row["high"] for row in mine.values())
+            pad = 0.08 * ((high - low) or max(abs(high), 1.0))
+            axes.set_xlim(low - pad, high + pad)
         axes.set_ylim(-0.6, len(methods) - 0.4)
         axes.invert_yaxis()
         axes.set_xlabel(metric_label(env_ids[task], column))
@@ -226,7 +230,9 @@ def final_figure(
         at = f"{steps[0] / 1e6:.3g}M steps" if len(steps) == 1 else "each run's last checkpoint"
         axes.set_title(f"{task} ({at})", fontsize=10)
         axes.grid(axis="x", alpha=0.3)
-    figure.suptitle(f"Final performance: IQM across runs, {confidence:.0%} stratified-bootstrap CI", fontsize=10)
+    separator = "\n" if columns == 1 else " "  # one panel is too narrow for the title on one line
+    title = f"Final performance:{separator}IQM across runs, {confidence:.0%} stratified-bootstrap CI"
+    figure.suptitle(title, fontsize=10)
     return figure
 
 

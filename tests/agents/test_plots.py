@@ -98,6 +98,9 @@ def test_final_figure_bars(loaded: results.Results) -> None:
             assert bar.get_x() == pytest.approx(row["low"]) and bar.get_width() == pytest.approx(
                 row["high"] - row["low"]
             )
+        left, right = axes.get_xlim()  # every interval and tick inside the panel, none pinned to its edge
+        task_rows = [r for r in rows if r["task"] == task]
+        assert left < min(r["low"] for r in task_rows) and right > max(r["high"] for r in task_rows)
 
 
 def test_save_figure_writes_png_and_pdf_atomically(loaded: results.Results, tmp_path: Path) -> None:
