@@ -35,6 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--worse", default="ppo", help="the method that must lose")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (repeatable)")
     args = parser.parse_args(argv)
+    if len(set(args.seeds)) < 2:
+        # an interval over one run per method is a single point: "separated" would then only mean "different"
+        parser.error(f"--seeds needs at least 2 distinct seeds (got {args.seeds}): the 95% intervals are over runs")
     grid = read_config_file(args.config).get("grid", {})
     bundles = grid.get("method", {})
     missing = [name for name in (args.better, args.worse) if name not in bundles]

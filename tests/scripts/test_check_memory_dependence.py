@@ -22,3 +22,10 @@ def test_passes_when_memory_wins_and_fails_when_asked_the_other_way(tmp_path: Pa
     assert "NOT separated" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         check_memory_dependence.main([*args, "--better", "lstm"])
+
+
+def test_refuses_a_single_seed(tmp_path: Path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        check_memory_dependence.main(["--config", str(PANEL), "--seeds", "3", "3", "--root", str(tmp_path)])
+    assert "at least 2 distinct seeds" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())  # refused before training anything
