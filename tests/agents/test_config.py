@@ -7,7 +7,17 @@ from pathlib import Path
 import pytest
 import yaml
 
-from agents.config import Config, ConfigError, Schedule, config_from_dict, config_to_dict, dump_config, load_config
+from agents.config import (
+    Config,
+    ConfigError,
+    Schedule,
+    config_from_dict,
+    config_to_dict,
+    dump_config,
+    expand_grid,
+    load_config,
+    read_config_file,
+)
 
 CONFIG_ROOT = Path(__file__).resolve().parents[2] / "configs"
 CONFIGS = sorted(CONFIG_ROOT.rglob("*.yaml"))
@@ -204,3 +214,17 @@ def test_mortar_mayhem_b_grid_configs_are_table_6() -> None:
         assert config.model.hidden_size == 512
         if memory == "gru":
             assert config.model.memory_size == 512 and config.ppo.sequence_length == "max"
+
+
+def test_cpu_ablation_differs_from_its_panel_by_the_clue_delay_only() -> None:
+    """configs/cpu/mm_grid_1_delay4.yaml is the panel's 4-Stack with one change; the two files must not drift."""
+    root = CONFIG_ROOT / "cpu"
+    panel = {p.choice("method"): p.config for p in expand_grid(read_config_file(root / "mm_grid_1.yaml"))}
+    ablation = expand_grid(read_config_file(root / "mm_grid_1_delay4.yaml"))
+    assert [p.choice("method") for p in ablation] == ["stack4"] * 3
+    for point in ablation:
+        expected = config_to_dict(panel["stack4"])
+        expected["env"]["options"]["command_show_delay"] = [4]
+        expected["run"]["seed"] = point.config.run.seed
+        expected["run"]["task"] = "mm_grid_1_delay4"  # the task's label, which names its results
+        assert config_to_dict(point.config) == expected
