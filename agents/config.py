@@ -277,16 +277,41 @@ class Config:
         return [high + 1, high + DEFAULT_EVAL_SEEDS]
 
 
+def rounding_notice(config: Config) -> str | None:
+    """What ``run.total_steps`` resolves to when it is not a whole number of updates (None when it is): training
+    stops after the last whole update, and the command line says so instead of training fewer steps silently."""
+    steps, batch = config.run.total_steps, config.batch_size
+    if steps % batch == 0:
+        return None
+    updates = config.num_updates
+    return (
+        f"run.total_steps={steps} is not a whole number of updates of {batch} steps (run.workers x run.worker_steps "
+        f"= {config.run.workers} x {config.run.worker_steps}): training {updates} updates, {updates * batch} steps"
+    )
+
+
 # ------------------------------------------------------------------------------------------------- loading
 def read_config_file(path: str | Path) -> dict[str, Any]:
     """The mapping a YAML config file holds, or a :class:`ConfigError` naming what is wrong with the file."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"config file {str(path)!r} does not exist")
-    raw = yaml.safe_load(path.read_text()) or {}
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{path}: {_yaml_error(err)}") from err
     if not isinstance(raw, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level, got {type(raw).__name__}")
     return raw
+
+
+def _yaml_error(err: yaml.YAMLError) -> str:
+    """A YAML syntax error as 'line L, column C: problem' (1-based, where the parser stopped), without a traceback."""
+    mark = getattr(err, "problem_mark", None)
+    problem = getattr(err, "problem", None) or str(err)
+    context = getattr(err, "context", None)
+    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+    return f"{where}invalid YAML: {problem}" + (f" ({context})" if context else "")
 
 
 def load_config(path: str | Path, overrides: Iterable[str] = ()) -> Config:
@@ -381,6 +406,11 @@ def _build(cls: type, raw: Any, prefix: str, defaults: Any = None) -> Any:
         raw = _float_or_text(raw)  # YAML 1.1 reads 1e-3 (no dot) as a string
     if cls is Schedule and _is_number(raw):
         raw = _constant_schedule(raw)
+    if cls is Schedule and not isinstance(raw, Mapping):  # neither form of a schedule: say both, not just one
+        raise ConfigError(
+            f"{prefix}={raw!r} is invalid: expected a number (a constant) or a mapping "
+            "{initial: ..., final: ..., decay_updates: ...} (a linear schedule)"
+        )
     if not isinstance(raw, Mapping):
         raise ConfigError(f"{prefix or 'config'} must be a mapping of keys to values, got {raw!r}")
     names = [f.name for f in dataclasses.fields(cls)]
@@ -403,16 +433,18 @@ def _build(cls: type, raw: Any, prefix: str, defaults: Any = None) -> Any:
     return instance
 
 
-def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any]) -> Any:
-    """Validate one value against its annotated type and bounds; return it in canonical form."""
+def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any], text_numbers: bool = True) -> Any:
+    """Validate one value against its annotated type and bounds; return it in canonical form. ``text_numbers``: a
+    string that spells a number is that number (off where the field also takes strings, e.g. ``int | str``)."""
     origin, args = get_origin(tp), get_args(tp)
     if origin in (Union, types.UnionType):
         if value is None and type(None) in args:
             return None
         errors = []
-        for option in (a for a in args if a is not type(None)):
+        options = [a for a in args if a is not type(None)]
+        for option in options:
             try:
-                return _convert(option, value, key, meta)
+                return _convert(option, value, key, meta, text_numbers=str not in options)
             except ConfigError as err:
                 errors.append(str(err))
         expected = meta.get("expect") or _describe(tp)
@@ -422,7 +454,7 @@ def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any]) -> Any:
             raise ConfigError(f"{key}={value!r} is invalid: expected true or false")
         return value
     if tp in (int, float):
-        return _number(tp, value, key, meta)
+        return _number(tp, value, key, meta, text_numbers)
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"{key}={value!r} is invalid: expected a string")
@@ -439,16 +471,22 @@ def _convert(tp: Any, value: Any, key: str, meta: Mapping[str, Any]) -> Any:
     raise TypeError(f"config field {key} has an unsupported annotation {tp!r}")  # a bug in this module
 
 
-def _number(tp: type, value: Any, key: str, meta: Mapping[str, Any]) -> int | float:
+def _number(tp: type, value: Any, key: str, meta: Mapping[str, Any], text_numbers: bool = True) -> int | float:
+    """A number field's value. Scientific notation is accepted for ints too (``total_steps: 1e5``, ``1.0e5``,
+    ``100000.0``) as long as the value is whole; YAML 1.1 reads ``1e5`` and ``1.0e5`` as strings, hence the parse."""
     low, high = meta.get("low"), meta.get("high")
     bounds = ""
     if low is not None or high is not None:
         bounds = f" in [{'-inf' if low is None else f'{low:g}'}, {'inf' if high is None else f'{high:g}'}]"
     expected = f"{'an int' if tp is int else 'a number'}{bounds}"
-    if tp is float and isinstance(value, str):
-        value = _float_or_text(value)  # YAML 1.1 reads 1e-5 (no dot) as a string
-    if isinstance(value, bool) or not _is_number(value) or (tp is int and not isinstance(value, numbers.Integral)):
-        raise ConfigError(f"{key}={value!r} is invalid: expected {expected}")
+    given = value
+    if text_numbers and isinstance(value, str):
+        value = _float_or_text(value)
+    if isinstance(value, bool) or not _is_number(value):
+        raise ConfigError(f"{key}={given!r} is invalid: expected {expected}")
+    if tp is int and not isinstance(value, numbers.Integral):
+        if not (math.isfinite(value) and float(value).is_integer()):
+            raise ConfigError(f"{key}={given!r} is invalid: expected {expected}; {value:g} is not a whole number")
     value = int(value) if tp is int else float(value)
     if not math.isfinite(value) or (low is not None and value < low) or (high is not None and value > high):
         raise ConfigError(f"{key}={value!r} is invalid: expected {expected}")

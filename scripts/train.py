@@ -13,7 +13,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
-from agents.config import ConfigError, load_config  # noqa: E402
+from agents.config import ConfigError, load_config, rounding_notice  # noqa: E402
 from agents.trainer import Trainer, TrainingDiverged, default_run_dir  # noqa: E402
 
 
@@ -40,6 +40,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    notice = rounding_notice(trainer.config)
+    if notice and not args.resume:
+        print(f"note: {notice}", flush=True)
     print(f"run directory: {trainer.run_dir}", flush=True)
     try:
         history = trainer.train()

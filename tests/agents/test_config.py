@@ -127,8 +127,78 @@ def test_schedules_and_floats_accept_every_usual_spelling(spelling: str) -> None
     # a constant spelt as a string, then given a final value, decays from it
     decaying = config_from_dict({"ppo": {"learning_rate": "1e-3"}}, ["ppo.learning_rate.final=1e-4"])
     assert decaying.ppo.learning_rate == Schedule(1e-3, 1e-4)
-    with pytest.raises(ConfigError, match="ppo.learning_rate must be a mapping"):
+    with pytest.raises(ConfigError, match=r"ppo.learning_rate='fast' is invalid: expected a number .* or a mapping"):
         config_from_dict({}, ["ppo.learning_rate=fast"])
+
+
+@pytest.mark.parametrize("where", ["yaml", "override"])
+def test_a_schedule_that_is_neither_a_number_nor_a_mapping_says_so(where: str) -> None:
+    """``clip_range: 0.2x`` is a typo of a number: the message names both forms a schedule takes, not only one."""
+    with pytest.raises(ConfigError) as err:
+        if where == "yaml":
+            load_config_text("ppo: {clip_range: 0.2x}")
+        else:
+            config_from_dict({}, ["ppo.clip_range=0.2x"])
+    message = str(err.value)
+    assert "ppo.clip_range='0.2x' is invalid: expected a number (a constant) or a mapping" in message
+    assert "must be a mapping" not in message
+
+
+@pytest.mark.parametrize("spelling", ["1e5", "1.0e5", "1E5", "100000.0", "100000", "1.0e+5"])
+def test_integer_fields_accept_whole_numbers_in_scientific_notation(spelling: str) -> None:
+    """YAML 1.1 reads ``1e5`` and ``1.0e5`` as strings and ``1.0e+5`` as a float: an int field takes them all when
+    the value is whole, in a file, in an override and inside a list."""
+    from_yaml = load_config_text(f"run: {{total_steps: {spelling}}}\nenv: {{train_seeds: [0, {spelling}]}}")
+    from_override = config_from_dict({}, [f"run.total_steps={spelling}", f"env.train_seeds=[0, {spelling}]"])
+    for config in (from_yaml, from_override):
+        assert config.run.total_steps == 100_000 and type(config.run.total_steps) is int
+        assert config.env.train_seeds == [0, 100_000] and type(config.env.train_seeds[1]) is int
+
+
+@pytest.mark.parametrize("spelling", ["1.5e0", "2.5", "1e-3", "nan", "inf"])
+def test_integer_fields_refuse_fractions_naming_the_key(spelling: str) -> None:
+    for make in (
+        lambda: load_config_text(f"ppo: {{epochs: {spelling}}}"),
+        lambda: config_from_dict({}, [f"ppo.epochs={spelling}"]),
+    ):
+        with pytest.raises(ConfigError, match=r"ppo\.epochs=.* is invalid: expected an int in \[1, inf\]"):
+            make()
+
+
+def test_fields_that_also_take_strings_keep_numeric_looking_strings() -> None:
+    """Only plain int fields parse a string as a number: a quoted SLURM time of '90' minutes stays a string, and
+    ``sequence_length`` still takes an int, a whole float, or 'max'."""
+    from agents.config import grid_slurm
+
+    assert grid_slurm({"slurm": {"time": "90"}}).time == "90"
+    assert config_from_dict({"ppo": {"sequence_length": 16.0}}).ppo.sequence_length == 16
+    assert config_from_dict({}, ["ppo.sequence_length=max"]).ppo.sequence_length == "max"
+
+
+def test_rounding_to_whole_updates_is_announced() -> None:
+    from agents.config import rounding_notice
+
+    config = config_from_dict({}, ["run.total_steps=3000", "run.workers=4", "run.worker_steps=256"])
+    assert config.num_updates == 2
+    assert rounding_notice(config) == (
+        "run.total_steps=3000 is not a whole number of updates of 1024 steps (run.workers x run.worker_steps = "
+        "4 x 256): training 2 updates, 2048 steps"
+    )
+    assert (
+        rounding_notice(config_from_dict({}, ["run.total_steps=3072", "run.workers=4", "run.worker_steps=256"])) is None
+    )
+
+
+def test_a_yaml_syntax_error_names_the_file_line_and_column(tmp_path: Path) -> None:
+    path = tmp_path / "broken.yaml"
+    path.write_text("run:\n  seed: 1\nppo: {gamma: 0.99\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: line 4, column 1: invalid YAML: expected ',' or '}}'"), message
+    path.write_text("run:\n  seed: 1\n   workers: 2\n")
+    with pytest.raises(ConfigError, match=r"broken\.yaml: line 3, column 11: invalid YAML: mapping values"):
+        read_config_file(path)
 
 
 def load_config_text(text: str):
