@@ -47,3 +47,21 @@ def test_what_the_project_says_it_has_exists() -> None:
         assert (ROOT / script).is_file(), script
     else:
         raise AssertionError("a config with a grid was accepted by the trainer")
+
+
+def test_the_headless_notebook_command_writes_the_page(tmp_path: Path) -> None:
+    """The first hour's nbconvert line runs as written (on the committed example results, into a temporary dir)."""
+    import os
+    import shlex
+    import subprocess
+    import sys
+
+    line = re.search(r"`(MEMORY_GYM_RESULTS=\S+ jupyter nbconvert [^`]+)`", (ROOT / "README.md").read_text()).group(1)
+    assignment, *command = shlex.split(line)
+    assert command[-2] == "--output-dir", command
+    command[-1] = str(tmp_path)
+    env = {**os.environ, "MEMORY_GYM_RESULTS": "results/examples/proof_of_memory"}
+    jupyter = Path(sys.executable).with_name("jupyter")
+    subprocess.run([str(jupyter), *command[1:]], cwd=ROOT, env=env, check=True, capture_output=True, timeout=300)
+    page = (tmp_path / "plots.html").read_text()
+    assert "<img" in page and "Traceback" not in page
