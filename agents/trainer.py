@@ -103,7 +103,7 @@ class Trainer:
         self.actor.start(self._episode_seeds(workers), seed_source=self._episode_seeds)
         self.recent_returns: deque[float] = deque(maxlen=RECENT_EPISODES)
         self.history: list[dict[str, float]] = []
-        self.training_rows: list[dict[str, Any]] = []
+        self._training_log: TrainingLog | None = None  # training.csv while train() runs
         self.eval_records: list[dict[str, Any]] = []
         self._eval_core: Any = None
 
@@ -136,13 +136,14 @@ class Trainer:
     def train(self) -> list[dict[str, float]]:
         """Run the remaining updates; returns one metrics dict per update run by this call."""
         self._write_run_files()
+        self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
         writer = _summary_writer(self.run_dir, self.global_step)
         progress = _progress_bar(self.config, self.global_step)
         try:
             while self.update < self.num_updates:
                 metrics = self.train_update()
                 self.history.append(metrics)
-                self.training_rows.append(self._training_row(metrics))
+                self._training_log.append(self._training_row(metrics))
                 last = self.update == self.num_updates
                 eval_interval = self.config.eval.interval
                 if eval_interval and (self.update % eval_interval == 0 or last):
@@ -153,6 +154,8 @@ class Trainer:
                 if last or (interval and self.update % interval == 0):
                     self.save_checkpoint()
         finally:
+            self._training_log.close()
+            self._training_log = None
             writer.close()
             if progress is not None:
                 progress.close()
@@ -308,8 +311,8 @@ class Trainer:
 
     # ------------------------------------------------------------------------------------------ checkpoints
     def save_checkpoint(self) -> Path:
-        """Write ``checkpoints/update_NNNNNNN.pt`` atomically, prune old ones, and bring ``training.csv`` up to
-        date; returns the checkpoint's path."""
+        """Write ``checkpoints/update_NNNNNNN.pt`` atomically and prune old ones; returns the checkpoint's path.
+        ``training.csv`` already holds this update's row (appended after every update); it is synced to disk here."""
         if not all(torch.isfinite(p).all() for p in self.model.parameters()):
             raise TrainingDiverged(f"non-finite weights at update {self.update}; no checkpoint written")
         state = {
@@ -335,7 +338,8 @@ class Trainer:
             "helm": None if self.helm is None else self.helm.fingerprint(),  # rebuilt from the config, not stored
             "recent_returns": list(self.recent_returns),
         }
-        _write_csv(self.run_dir / "training.csv", list(TRAINING_COLUMNS), self.training_rows)
+        if self._training_log is not None:
+            self._training_log.sync()
         keep = self.config.run.keep_checkpoints
         return write_checkpoint(checkpoint_path(self.run_dir, self.update), state, keep)
 
@@ -358,8 +362,7 @@ class Trainer:
         self.actor.load_state(state["actor"], seed_source=self._episode_seeds)
         self.recent_returns = deque(state["recent_returns"], maxlen=RECENT_EPISODES)
         # What a killed run wrote after this checkpoint is dropped, so the files hold what an uninterrupted run holds
-        training = self.run_dir / "training.csv"
-        self.training_rows = [r for r in _read_csv(training) if int(r["step"]) <= self.global_step]
+        # (training.csv's rows past it are dropped when train() opens the file: TrainingLog)
         evaluated = self.run_dir / "eval" / "episodes.csv"
         if evaluated.is_file():
             self.eval_records = [r for r in read_records(evaluated) if r["step"] <= self.global_step]
@@ -386,19 +389,45 @@ class Trainer:
 
 
 # ----------------------------------------------------------------------------------------------- helpers
-def _write_csv(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
-    text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=columns, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    atomic_write_text(path, text.getvalue())
+class TrainingLog:
+    """``training.csv``, one row appended and flushed per update, so a running (or killed) run's log is current.
+
+    Opened at ``step`` (0 for a new run, the checkpoint's step on resume), it first rewrites the file atomically with
+    the header and the rows up to ``step`` only: rows a killed run appended after its last checkpoint, and a last line
+    torn by the kill, are dropped, so that after a resume the file holds what an uninterrupted run's holds (the
+    TensorBoard events are truncated the same way, by ``purge_step``)."""
+
+    def __init__(self, path: Path, step: int, columns: tuple[str, ...] = TRAINING_COLUMNS) -> None:
+        self.path = path
+        kept = [row for row in _complete_rows(path) if int(row["step"]) <= step] if step > 0 else []
+        text = io.StringIO()
+        rewrite = csv.DictWriter(text, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
+        rewrite.writeheader()
+        rewrite.writerows(kept)
+        atomic_write_text(path, text.getvalue())
+        self._handle = open(path, "a", newline="")  # noqa: SIM115 (held open across updates, closed by close())
+        self._writer = csv.DictWriter(self._handle, fieldnames=list(columns), lineterminator="\n")
+
+    def append(self, row: dict[str, Any]) -> None:
+        self._writer.writerow(row)
+        self._handle.flush()  # a reader (or a kill) sees every finished update
+
+    def sync(self) -> None:
+        """Force the rows to disk (at a checkpoint: the log then survives whatever the checkpoint survives)."""
+        os.fsync(self._handle.fileno())
+
+    def close(self) -> None:
+        self._handle.close()
 
 
-def _read_csv(path: Path) -> list[dict[str, Any]]:
+def _complete_rows(path: Path) -> list[dict[str, Any]]:
+    """The rows of a CSV file, without a last line that a kill cut short (no newline at its end)."""
     if not path.is_file():
         return []
-    with open(path, newline="") as handle:
-        return list(csv.DictReader(handle))
+    text = path.read_text()
+    if text and not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]
+    return list(csv.DictReader(io.StringIO(text)))
 
 
 def _is_numeric(value: Any) -> bool:

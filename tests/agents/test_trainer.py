@@ -102,6 +102,10 @@ def _check_resume(tmp_path: Path, config) -> None:
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     assert latest_checkpoint(tmp_path / "b").name == "update_0000004.pt"
+    # training.csv had a row per update, the one past the checkpoint included, then a kill tore a line in two
+    assert [row["step"] for row in _rows(tmp_path / "b" / "training.csv")] == [str(64 * u) for u in range(1, 6)]
+    with open(tmp_path / "b" / "training.csv", "a") as handle:
+        handle.write("b,gru,ProofOfMemory-v0,ProofOfMemory-v0,38")
     _next_second()  # event files are named by time, then by a per-process counter: keep the resumed one after
     resumed = Trainer.resume(tmp_path / "b")
     assert resumed.update == 4 and resumed.global_step == 4 * 64
@@ -112,6 +116,9 @@ def _check_resume(tmp_path: Path, config) -> None:
     assert [r["update"] for r in info["resumed"]] == [4]
     for name in ("training.csv", "eval/episodes.csv"):
         assert _rows(tmp_path / "a" / name) == _rows(tmp_path / "b" / name), name
+    uninterrupted_log = (tmp_path / "a" / "training.csv").read_text()
+    assert (tmp_path / "b" / "training.csv").read_text() == uninterrupted_log.replace("\na,", "\nb,")  # the run column
+    assert uninterrupted_log.count("run,method,task") == 1 and uninterrupted_log.endswith("\n")
     uninterrupted_events, resumed_events = _scalars(tmp_path / "a"), _scalars(tmp_path / "b")
     assert set(uninterrupted_events) == set(resumed_events)
     for tag, points in uninterrupted_events.items():
@@ -137,6 +144,22 @@ def _scalars(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
     events = EventAccumulator(str(run_dir))
     events.Reload()
     return {tag: [(e.step, e.value) for e in events.Scalars(tag)] for tag in events.Tags()["scalars"]}
+
+
+def test_training_csv_gets_a_row_per_update_while_the_run_goes_on(tmp_path: Path) -> None:
+    """With checkpoint_interval 0 (a checkpoint only at the end) the log still grows by one flushed row per update:
+    read by another reader before each update, it holds every update done so far."""
+    trainer = Trainer(_config("run.checkpoint_interval=0"), tmp_path)
+    path, run_update, seen = tmp_path / "training.csv", trainer.train_update, []
+
+    def update_and_read() -> dict[str, float]:
+        seen.append([row["step"] for row in _rows(path)])
+        return run_update()
+
+    trainer.train_update = update_and_read  # type: ignore[method-assign]
+    trainer.train()
+    assert seen == [[str(64 * u) for u in range(1, done + 1)] for done in range(6)]
+    assert [row["step"] for row in _rows(path)] == [str(64 * u) for u in range(1, 7)]
 
 
 def test_resume_with_dict_observations_and_multidiscrete_actions(tmp_path: Path, dict_env: str) -> None:
