@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 import envs
-from agents.actor import Actor
+from agents.actor import Actor, Outcome
 from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
 from agents.config import Config, check_disjoint_seeds
 from agents.io import atomic_write_bytes, atomic_write_text, provenance, write_json_atomic
@@ -30,7 +30,8 @@ from agents.results import EPISODE_COLUMNS, read_episodes
 from agents.results import summarize as summarize_episodes
 
 RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
-FrameHook = Callable[[Actor], None]  # called with the actor once before the first decision and after every decision
+# called with the actor once before the first decision (outcome None) and after every decision with its outcome
+FrameHook = Callable[[Actor, Outcome | None], None]
 
 
 def evaluate(
@@ -64,14 +65,14 @@ def evaluate(
     finals: dict[int, dict[str, Any]] = {}
     bar = _progress(slots, progress)
     if on_frame is not None:
-        on_frame(actor)
+        on_frame(actor, None)
     while actor.active.any():
         outcome = actor.advance(actor.decide(greedy))
         finals.update(outcome.finals)
         if bar is not None and outcome.finals:
             bar.update(len(outcome.finals))
         if on_frame is not None:
-            on_frame(actor)
+            on_frame(actor, outcome)
     if bar is not None:
         bar.close()
     metric = metric_of(config.env.id)
@@ -257,37 +258,91 @@ def evaluate_runs(
 
 
 class EpisodeVideo:
-    """Frames of the first ``episodes`` slots of an evaluation: the agent's view (upscaled) beside the ground-truth
-    debug view, while the slot plays; written as one GIF per episode."""
+    """Frames of the first ``episodes`` slots of an evaluation, written as one GIF per episode: the agent's view
+    (upscaled) beside the ground-truth debug view, each labelled above, and below them the step, the action just
+    taken, its reward and the episode's running return."""
+
+    VIEWS = ("agent's view", "ground truth")
 
     def __init__(self, episodes: int) -> None:
         self.episodes = episodes
         self.frames: list[list[np.ndarray]] = [[] for _ in range(episodes)]
+        self.captions: list[list[str]] = [[] for _ in range(episodes)]
+        self.returns = [0.0] * episodes
         self.ended = [False] * episodes
 
-    def __call__(self, actor: Actor) -> None:
+    def __call__(self, actor: Actor, outcome: Outcome | None) -> None:
         core = actor.core
+        rewards = None if outcome is None else outcome.rewards.float().cpu().numpy()
         for slot in range(self.episodes):
-            if not self.ended[slot]:  # every frame while the slot plays, its last one included
-                self.ended[slot] = not actor.active[slot]
-                agent = core.agent_frame(slot)
-                debug = core.debug_frame(slot)
-                scale = debug.shape[0] // agent.shape[0]
-                agent = np.repeat(np.repeat(agent, scale, axis=0), scale, axis=1)
-                self.frames[slot].append(np.concatenate((agent, debug), axis=1))
+            if self.ended[slot]:
+                continue
+            self.ended[slot] = not actor.active[slot]  # every frame while the slot plays, its last one included
+            step = len(self.frames[slot])
+            if rewards is None:
+                caption = f"step 0   return {self.returns[slot]:.2f}"
+            else:
+                reward = float(rewards[slot])
+                self.returns[slot] += reward
+                action = _action_text(actor.memory.actions[slot][-1])
+                caption = f"step {step}   action {action}   reward {reward:+.2f}   return {self.returns[slot]:.2f}"
+            agent = core.agent_frame(slot)
+            debug = core.debug_frame(slot)
+            scale = debug.shape[0] // agent.shape[0]
+            agent = np.repeat(np.repeat(agent, scale, axis=0), scale, axis=1)
+            self.frames[slot].append(np.concatenate((agent, debug), axis=1))
+            self.captions[slot].append(caption)
 
     def write(self, directory: Path, name: str, records: Sequence[dict[str, Any]]) -> list[Path]:
-        from PIL import Image
-
         paths = []
         for slot, frames in enumerate(self.frames):
             if not frames:
                 continue
             record = records[slot]
             path = directory / f"{name}-seed{record['seed']}-rep{record['repetition']}.gif"
-            images = [Image.fromarray(frame) for frame in frames]
+            captions = self.captions[slot]
+            images = [labelled_frame(frame, self.VIEWS, text) for frame, text in zip(frames, captions, strict=True)]
             data = io.BytesIO()
             images[0].save(data, format="GIF", save_all=True, append_images=images[1:], duration=80, loop=0)
             atomic_write_bytes(path, data.getvalue())
             paths.append(path)
         return paths
+
+
+def _action_text(action: np.ndarray) -> str:
+    """One branch as its index, several as a tuple (MultiDiscrete)."""
+    values = [int(value) for value in np.ravel(action)]
+    return str(values[0]) if len(values) == 1 else "(" + ", ".join(map(str, values)) + ")"
+
+
+def labelled_frame(frame: np.ndarray, views: Sequence[str], caption: str) -> Any:
+    """``frame`` (views side by side, equally wide) as a PIL image with a black band above naming each view and
+    one below holding ``caption``; the text is sized to the frame (Pillow's bundled font, no extra dependency)."""
+    from PIL import Image, ImageDraw
+
+    height, width = frame.shape[:2]
+    font = _font(max(12, height // 22))
+    band = int(font.size * 1.6) if hasattr(font, "size") else 16
+    canvas = Image.new("RGB", (width, height + 2 * band))
+    canvas.paste(Image.fromarray(np.ascontiguousarray(frame[..., :3])), (0, band))
+    draw = ImageDraw.Draw(canvas)
+    part = width / len(views)
+
+    def put(text: str, centre_x: float, top: int) -> None:
+        left, upper, right, lower = draw.textbbox((0, 0), text, font=font)
+        x = max(2, centre_x - (right - left) / 2)
+        draw.text((x, top + (band - (lower - upper)) / 2 - upper), text, fill=(255, 255, 255), font=font)
+
+    for index, view in enumerate(views):
+        put(view, part * (index + 0.5), 0)
+    put(caption, width / 2, height + band)
+    return canvas
+
+
+def _font(size: int) -> Any:
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)  # scalable with FreeType (Pillow >= 10.1)
+    except (TypeError, ImportError, OSError):
+        return ImageFont.load_default()

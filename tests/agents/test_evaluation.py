@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
-from PIL import Image
+from PIL import Image, ImageSequence
 
+from agents.checkpoint import load_policy
 from agents.config import config_from_dict
-from agents.evaluation import RECORD_COLUMNS, parse_seed_range, read_records
+from agents.evaluation import RECORD_COLUMNS, EpisodeVideo, evaluate, labelled_frame, parse_seed_range, read_records
 from agents.trainer import Trainer
 from scripts import evaluate as evaluate_script
 
@@ -90,7 +93,32 @@ def test_videos_show_the_agent_view_beside_the_ground_truth(run_dir: Path, tmp_p
     gifs = sorted(video.glob("*.gif"))
     assert [g.name for g in gifs] == ["tiny-seed1-step128-seed1000-rep0.gif", "tiny-seed1-step128-seed1000-rep1.gif"]
     with Image.open(gifs[0]) as gif:
-        assert gif.size == (2 * 144, 144)  # 36x36 agent view upscaled 4x beside the 144x144 ground truth
+        width, height = gif.size
+        frames = [np.asarray(frame.convert("RGB")) for frame in ImageSequence.Iterator(gif)]
+    assert width == 2 * 144 and height > 144  # 36x36 agent view upscaled 4x beside the 144x144 ground truth, + text
+    band = (height - 144) // 2
+    header, footer = frames[0][:band], [frame[band + 144 :] for frame in frames]
+    assert header[:, :144].any() and header[:, 144:].any(), "both views are labelled"
+    assert len(frames) > 2 and not np.array_equal(footer[0], footer[-1]), "the step and return below change"
+
+
+def test_video_frames_carry_step_action_reward_and_running_return(run_dir: Path) -> None:
+    """The captions follow the episode (the last one's return is the record's), and the drawn text follows them."""
+    policy = load_policy(run_dir)
+    recorder = EpisodeVideo(3)
+    records = evaluate(policy.model, policy.helm, policy.config, [1000, 1001, 1002], 1, on_frame=recorder)
+    for captions, frames, record in zip(recorder.captions, recorder.frames, records, strict=True):
+        assert len(captions) == len(frames) == record["length"] + 1  # the first observation, then every step
+        assert captions[0] == "step 0   return 0.00"
+        assert re.fullmatch(r"step 1   action [01]   reward [+-]\d\.\d\d   return -?\d\.\d\d", captions[1])
+        assert captions[-1].endswith(f"return {record['return']:.2f}")
+    frame = recorder.frames[0][0]
+    before = np.asarray(labelled_frame(frame, EpisodeVideo.VIEWS, "step 3   return 0.00"))
+    after = np.asarray(labelled_frame(frame, EpisodeVideo.VIEWS, "step 3   return 1.00"))
+    band = (before.shape[0] - frame.shape[0]) // 2
+    assert np.array_equal(before[band:-band], frame) and np.array_equal(before[:band], after[:band])
+    assert not np.array_equal(before[-band:], after[-band:]), "the running return is drawn"
+    assert not np.array_equal(before[:band], np.zeros_like(before[:band])), "the views are named"
 
 
 def test_a_run_without_its_config_is_refused(tmp_path: Path, capsys) -> None:
