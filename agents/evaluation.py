@@ -161,15 +161,41 @@ def _progress(total: int, enabled: bool) -> Any:
 
 # --------------------------------------------------------------------------------------- evaluating run directories
 def parse_seed_range(text: str) -> list[int]:
-    """``LOW:HIGH`` (HIGH excluded, as a Python range) -> the inclusive [low, high] of those seeds."""
-    low, sep, high = text.partition(":")
+    """``LOW..HIGH`` (both ends included, like the config's ``eval.seeds``) or ``LOW:HIGH`` (HIGH excluded, as a
+    Python range) -> the inclusive [low, high] of those seeds."""
+    inclusive = ".." in text
+    low, sep, high = text.partition(".." if inclusive else ":")
     try:
-        first, end = int(low), int(high)
+        first, last = int(low), int(high) - (0 if inclusive else 1)
     except ValueError:
-        first = end = -1
-    if not sep or first < 0 or end <= first:
-        raise ValueError(f"--seeds {text!r} is invalid: expected LOW:HIGH with 0 <= LOW < HIGH, e.g. 100000:100030")
-    return [first, end - 1]
+        first, last = -1, -2
+    if not sep or first < 0 or last < first:
+        raise ValueError(
+            f"--seeds {text!r} is invalid: expected LOW..HIGH (both ends included, 0 <= LOW <= HIGH, e.g. "
+            "100000..100029) or LOW:HIGH (HIGH excluded, 0 <= LOW < HIGH, e.g. 100000:100030)"
+        )
+    return [first, last]
+
+
+def describe_seeds(seed_range: Sequence[int]) -> str:
+    """An inclusive [low, high] as the command line prints it: ``novel seeds 100000..100029 (30 seeds)``."""
+    low, high = int(seed_range[0]), int(seed_range[1])
+    count = high - low + 1
+    return f"novel seeds {low}..{high} ({count} seed{'' if count == 1 else 's'})"
+
+
+def check_device(name: str) -> torch.device:
+    """``cpu``, ``cuda`` or ``cuda:N``, usable on this machine (torch itself would fail later, on a CPU-only build
+    with a bare AssertionError); a ValueError naming the device and the valid choices otherwise."""
+    if not (name == "cpu" or name == "cuda" or name.startswith("cuda:") and name[5:].isdigit()):
+        raise ValueError(f"device {name!r} is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'")
+    if name != "cpu":
+        if not torch.cuda.is_available():
+            raise ValueError(f"device {name!r}, but CUDA is not available here; use 'cpu'")
+        count, index = torch.cuda.device_count(), int(name[5:] or 0)
+        if index >= count:
+            raise ValueError(f"device {name!r}, but this machine has {count} CUDA device(s): cuda:0..cuda:{count - 1}")
+    return torch.device(name)
 
 
 def select_checkpoints(run_dir: Path, which: str, batch_size: int) -> list[Path]:
@@ -211,16 +237,32 @@ def evaluate_runs(
     videos: int = 3,
     device: str = "cpu",
     progress: bool = False,
+    echo: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Evaluate checkpoints of several runs on novel seeds; write ``out/episodes.csv`` and ``out/summary.json``
-    (atomically) and return the summary. Defaults come from each run's own ``eval`` block."""
-    records: list[dict[str, Any]] = []
-    for run_dir in run_dirs:
+    (atomically) and return the summary. Defaults come from each run's own ``eval`` block; ``echo`` receives what
+    is evaluated (the inclusive seed range, checkpoints)."""
+    say = echo or (lambda message: None)
+    if repetitions is not None and repetitions < 1:
+        raise ValueError(f"repetitions={repetitions} is invalid: expected a whole number >= 1")
+    if video is not None and videos < 1:
+        raise ValueError(f"videos={videos} is invalid: expected a whole number >= 1 (episodes per checkpoint)")
+    check_device(device)
+    plans = []
+    for run_dir in run_dirs:  # every run's input is checked before anything is evaluated
         config = run_config(run_dir)
         seed_range = parse_seed_range(seeds) if seeds else config.eval_seeds
         check_disjoint_seeds(config.env.train_seeds, seed_range)
-        reps = repetitions or config.eval.repetitions
-        for path in select_checkpoints(run_dir, checkpoints, config.batch_size):
+        reps = config.eval.repetitions if repetitions is None else repetitions
+        plans.append((run_dir, config, seed_range, reps, select_checkpoints(run_dir, checkpoints, config.batch_size)))
+    records: list[dict[str, Any]] = []
+    for run_dir, config, seed_range, reps, chosen in plans:
+        steps = [checkpoint_update(path) * config.batch_size for path in chosen]
+        say(
+            f"run {run_dir.name} ({run_dir}): {describe_seeds(seed_range)} x {reps} repetitions, "
+            f"checkpoint(s) at step(s) {', '.join(map(str, steps))}"
+        )
+        for path in chosen:
             policy = load_policy(run_dir, path, device)
             recorder = EpisodeVideo(min(videos, reps * (seed_range[1] - seed_range[0] + 1))) if video else None
             found = evaluate(

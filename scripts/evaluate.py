@@ -1,6 +1,6 @@
 """Score trained runs on novel seeds, the paper's way (30 seeds x 5 repetitions, actions sampled).
 
-    python scripts/evaluate.py --run DIR [DIR ...] [--seeds 100000:100030] [--repetitions 5]
+    python scripts/evaluate.py --run DIR [DIR ...] [--seeds LOW..HIGH | LOW:HIGH] [--repetitions 5]
         [--checkpoints last|all|STEP,...] [--greedy] [--out DIR] [--method NAME] [--task NAME] [--video DIR]
 
 Every run is rebuilt from its own saved config and checkpoint(s) (memory module, frame stack, HELM branch), and
@@ -8,37 +8,90 @@ all seed x repetition episodes of a checkpoint play at once in one batched envir
 ``OUT/episodes.csv`` (one record per episode) and ``OUT/summary.json`` (per run and checkpoint: mean, IQM and the
 paper's metric; IQM with 95% stratified-bootstrap intervals across runs per method and task), both atomically.
 The default seeds are the run's ``eval`` seeds (30 right after ``env.train_seeds`` unless the config names others);
-seeds that overlap the training range are refused. ``--video DIR`` writes GIFs of the first episodes: the agent's
-view beside the ground truth.
+the resolved inclusive range is printed, and seeds that overlap the training range are refused. ``--video DIR``
+writes GIFs of the first episodes: the agent's view beside the ground truth, with the step, action, reward and
+running return.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.config import ConfigError  # noqa: E402
-from agents.evaluation import evaluate_runs  # noqa: E402
+from agents.evaluation import check_device, evaluate_runs, parse_seed_range  # noqa: E402
 from agents.results import format_table  # noqa: E402
+
+SEED_LIMIT = 2**63 - 1  # torch's generator takes seeds up to here
+
+
+def whole_number(low: int, high: int | None = None) -> Callable[[str], int]:
+    """An argparse type: a whole number in [low, high], else a message with the valid range (exit status 2)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < low or high is not None and value > high:
+            bound = f">= {low}" if high is None else f"in [{low}, {high}]"
+            raise argparse.ArgumentTypeError(f"{text!r} is invalid: expected a whole number {bound}")
+        return value
+
+    return parse
+
+
+def seed_range(text: str) -> str:
+    """An argparse type for --seeds: checked here, resolved per run by evaluate_runs."""
+    try:
+        parse_seed_range(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err).replace("--seeds ", "", 1)) from None
+    return text
+
+
+def device(text: str) -> str:
+    try:
+        check_device(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    return text
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--run", nargs="+", required=True, metavar="DIR", help="run directories")
-    parser.add_argument("--seeds", help="novel seeds LOW:HIGH (end excluded), e.g. 100000:100030")
-    parser.add_argument("--repetitions", type=int, help="episodes per seed (default: the run's eval.repetitions)")
+    parser.add_argument(
+        "--seeds",
+        type=seed_range,
+        metavar="RANGE",
+        help="novel seeds: LOW..HIGH, both ends included (100000..100029 is 30 seeds, as eval.seeds: [100000, "
+        "100029] in a config), or LOW:HIGH with HIGH excluded (100000:100030, the same 30 seeds); "
+        "default: the run's eval seeds",
+    )
+    parser.add_argument(
+        "--repetitions", type=whole_number(1), help="episodes per seed, >= 1 (default: the run's eval.repetitions)"
+    )
     parser.add_argument("--checkpoints", default="last", help="last, all, or environment steps STEP,STEP,...")
     parser.add_argument("--greedy", action="store_true", help="argmax actions instead of sampling")
-    parser.add_argument("--sampling-seed", type=int, default=None, help="seed of the action sampling")
+    parser.add_argument(
+        "--sampling-seed",
+        type=whole_number(0, SEED_LIMIT),
+        default=None,
+        help="seed of the action sampling, >= 0 (default: the run's eval.seed)",
+    )
     parser.add_argument("--out", help="results directory (default: DIR/evaluation for a single run)")
     parser.add_argument("--method", help="method name in the records (default: from each run's config)")
     parser.add_argument("--task", help="task name in the records (default: from each run's config)")
     parser.add_argument("--video", metavar="DIR", help="write GIFs of a few episodes per checkpoint into DIR")
-    parser.add_argument("--videos", type=int, default=3, help="episodes per checkpoint in --video (default 3)")
-    parser.add_argument("--device", default="cpu")
+    parser.add_argument(
+        "--videos", type=whole_number(1), default=3, help="episodes per checkpoint in --video, >= 1 (default 3)"
+    )
+    parser.add_argument("--device", type=device, default="cpu", help="cpu, cuda or cuda:N (default: cpu)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     if args.out is None and len(args.run) > 1:
@@ -59,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             videos=args.videos,
             device=args.device,
             progress=not args.no_progress,
+            echo=print,
         )
     except (ConfigError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)

@@ -86,6 +86,19 @@ def test_default_seeds_overlap_error_and_checkpoint_choice(run_dir: Path, tmp_pa
         parse_seed_range("5-9")
 
 
+@pytest.mark.parametrize(
+    ("text", "expected"), [("100000:100030", [100000, 100029]), ("100000..100029", [100000, 100029]), ("7..7", [7, 7])]
+)
+def test_seed_ranges_in_both_conventions(text: str, expected: list[int]) -> None:
+    assert parse_seed_range(text) == expected
+
+
+@pytest.mark.parametrize("text", ["5-9", "7:7", "9:5", "9..5", "-1..3", "1..", ":5", "a..b"])
+def test_bad_seed_ranges_name_both_conventions(text: str) -> None:
+    with pytest.raises(ValueError, match=r"LOW\.\.HIGH \(both ends included.*LOW:HIGH \(HIGH excluded"):
+        parse_seed_range(text)
+
+
 def test_videos_show_the_agent_view_beside_the_ground_truth(run_dir: Path, tmp_path: Path) -> None:
     video = tmp_path / "video"
     args = ["--run", str(run_dir), "--out", str(tmp_path / "e"), "--video", str(video), "--videos", "2"]

@@ -1,0 +1,111 @@
+"""scripts/evaluate.py on tiny trained runs: merging into a results directory, run names, training logs for the
+curves, argument checks and the printed seed range."""
+
+from __future__ import annotations
+
+import copy
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+
+from agents.config import config_from_dict
+from agents.evaluation import evaluate_runs, read_records
+from agents.trainer import Trainer
+from scripts import evaluate as evaluate_script
+from tests.agents.test_evaluation import TINY
+
+QUIET = ["--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A GRU-PPO and a memory-less PPO run (checkpoints at steps 64 and 128), and the GRU run copied to two
+    directories both named seed1."""
+    root = tmp_path_factory.mktemp("runs")
+    ppo = copy.deepcopy(TINY)
+    ppo["model"] = {"memory": "none", "hidden_size": 8}
+    Trainer(config_from_dict(TINY), root / "gru" / "seed1").train()
+    Trainer(config_from_dict(ppo), root / "ppo" / "seed1").train()
+    for parent in ("a", "b"):
+        shutil.copytree(root / "gru" / "seed1", root / parent / "seed1")
+    return {name: root / name / "seed1" for name in ("gru", "ppo", "a", "b")}
+
+
+def evaluate(*args: str) -> int:
+    return evaluate_script.main([*args, *QUIET])
+
+
+def keys(directory: Path) -> set[tuple]:
+    return {
+        (r["method"], r["run"], r["step"], r["seed"], r["repetition"]) for r in read_records(directory / "episodes.csv")
+    }
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--repetitions", "0"], "argument --repetitions: '0' is invalid: expected a whole number >= 1"),
+        (["--repetitions", "-1"], "argument --repetitions: '-1' is invalid: expected a whole number >= 1"),
+        (["--repetitions", "2.5"], "argument --repetitions: '2.5' is invalid"),
+        (["--videos", "0"], "argument --videos: '0' is invalid: expected a whole number >= 1"),
+        (["--sampling-seed", "-3"], "argument --sampling-seed: '-3' is invalid: expected a whole number in [0, "),
+        (["--sampling-seed", str(2**64)], "argument --sampling-seed"),
+        (["--seeds", "10:10"], "argument --seeds: '10:10' is invalid: expected LOW..HIGH (both ends included"),
+        (["--seeds", "5-9"], "LOW:HIGH (HIGH excluded"),
+        (["--device", "gpu"], "argument --device: device 'gpu' is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'"),
+        (["--device", "cuda:x"], "valid choices: 'cpu', 'cuda', 'cuda:N'"),
+    ],
+)
+def test_bad_numbers_and_devices_are_refused_by_name(
+    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    """D11: exit status 2 and a message naming the argument, the value and what is valid; nothing written."""
+    with pytest.raises(SystemExit) as exit_info:
+        evaluate("--run", str(runs["gru"]), "--out", str(tmp_path / "e"), *args)
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "e").exists()
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="CUDA is available here")
+def test_cuda_on_a_machine_without_it_is_refused_cleanly(runs: dict[str, Path], capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        evaluate("--run", str(runs["gru"]), "--device", "cuda")
+    assert exit_info.value.code == 2
+    assert "argument --device: device 'cuda', but CUDA is not available here; use 'cpu'" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="CUDA is not available"):
+        evaluate_runs([runs["gru"]], runs["gru"] / "evaluation", device="cuda:0")
+
+
+def test_zero_repetitions_are_refused_by_the_library_too(runs: dict[str, Path], tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="repetitions=0 is invalid"):
+        evaluate_runs([runs["gru"]], tmp_path / "e", repetitions=0)
+
+
+@pytest.mark.parametrize(
+    ("seeds", "printed"),
+    [
+        ([], "novel seeds 1000..1003 (4 seeds) x 3 repetitions"),  # the run's eval.seeds: [1000, 1003]
+        (["--seeds", "2000..2002"], "novel seeds 2000..2002 (3 seeds) x 3 repetitions"),
+        (["--seeds", "2000:2003"], "novel seeds 2000..2002 (3 seeds) x 3 repetitions"),
+        (["--seeds", "2000..2000"], "novel seeds 2000..2000 (1 seed) x 3 repetitions"),
+    ],
+)
+def test_the_resolved_inclusive_seed_range_is_printed(
+    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str], seeds: list[str], printed: str
+) -> None:
+    """D16: both conventions resolve to one printed inclusive range, and the records hold exactly those seeds."""
+    out = tmp_path / "e"
+    assert evaluate("--run", str(runs["gru"]), "--out", str(out), *seeds) == 0
+    assert f"run seed1 ({runs['gru']}): {printed}, checkpoint(s) at step(s) 128" in capsys.readouterr().out
+    low, high = (int(n) for n in printed.split()[2].split(".."))
+    assert {r["seed"] for r in read_records(out / "episodes.csv")} == set(range(low, high + 1))
+
+
+def test_the_help_says_which_end_of_a_seed_range_is_included(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        evaluate_script.main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "LOW..HIGH, both ends included" in text and "LOW:HIGH with HIGH excluded" in text
