@@ -36,15 +36,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.config import ConfigError  # noqa: E402
-from agents.sweep import (  # noqa: E402
-    SweepError,
-    describe,
-    evaluate_panel,
-    launch_local,
-    launch_slurm,
-    load_panel,
-    wait_for_jobs,
-)
+from agents.slurm import launch_slurm, wait_for_jobs  # noqa: E402
+from agents.sweep import SweepError, describe, evaluate_panel, launch_local, load_panel  # noqa: E402
 
 # --slurm-* options -> grid.slurm keys, and whether the value is text (quoted so YAML keeps it a string)
 SLURM_OPTIONS = {

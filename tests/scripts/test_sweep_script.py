@@ -20,7 +20,8 @@ import yaml
 
 from agents.checkpoint import checkpoint_update, latest_checkpoint
 from agents.evaluation import read_records
-from agents.sweep import FINISHED, load_panel, run_status, wait_for_jobs
+from agents.slurm import wait_for_jobs
+from agents.sweep import FINISHED, load_panel, run_status
 from scripts import sweep as sweep_script
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -166,7 +167,7 @@ def _task_processes(controller: int) -> list[int]:
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="finds the job's process through /proc")
 def test_slurm_launcher_through_submitit_requeues_and_resumes(tmp_path: Path) -> None:
     pytest.importorskip("submitit")
-    from agents.sweep import launch_slurm
+    from agents.slurm import launch_slurm
 
     grid = {"method": {"gru": {}}, "run.seed": [0], "slurm": {"time": "5", "cpus_per_job": 1}}
     config = _write(tmp_path / "cluster.yaml", grid, {**TINY, "run": {**TINY["run"], "total_steps": 24 * 64}})
