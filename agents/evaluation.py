@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
-from collections.abc import Callable, Iterable, Sequence
+import tempfile
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -222,6 +225,105 @@ def select_checkpoints(run_dir: Path, which: str, batch_size: int) -> list[Path]
     return chosen
 
 
+def unique_run_names(
+    directories: Sequence[Path],
+    groups: Sequence[tuple[str, str]],
+    taken: Mapping[tuple[str, str, str], str] | None = None,
+) -> list[str]:
+    """The ``run`` column of each run directory: its own name (``seed1``) unless a run of the same (method, task)
+    -- ``groups`` -- shares it, then the shortest path suffix that tells them apart (``a/seed1``, ``b/seed1``).
+
+    A run is identified by (method, task, run) in the records, so sweeps' ``<method>/<task>/seed<k>`` keep
+    ``seed<k>``. ``taken`` maps (method, task, name) -> resolved directory for the names a results directory already
+    holds: a directory listed there keeps its name, and no other directory gets it."""
+    taken = dict(taken or {})
+    resolved = [str(Path(directory).resolve()) for directory in directories]
+    parts = [Path(path).parts for path in resolved]
+
+    def suffix(index: int, length: int) -> str:
+        return Path(*parts[index][-length:]).as_posix()
+
+    names = []
+    for i, group in enumerate(groups):
+        known = [
+            name for (method, task, name), path in taken.items() if (method, task) == group and path == resolved[i]
+        ]
+        if known:
+            names.append(sorted(known, key=len)[0])
+            continue
+        others = [j for j, other in enumerate(groups) if other == group and j != i]
+        for length in range(1, len(parts[i]) + 1):
+            name = suffix(i, length)
+            clash = any(len(parts[j]) >= length and suffix(j, length) == name for j in others)
+            if not clash and taken.get((*group, name), resolved[i]) == resolved[i]:
+                break
+        names.append(name)
+    return names
+
+
+@dataclass
+class _Plan:
+    """What is evaluated of one run directory, settled before anything runs (so bad input wastes no time)."""
+
+    directory: Path
+    config: Config
+    method: str
+    task: str
+    seeds: list[int]  # inclusive [low, high]
+    repetitions: int
+    checkpoints: list[Path]
+    name: str = ""
+
+    @property
+    def steps(self) -> list[int]:
+        return [checkpoint_update(path) * self.config.batch_size for path in self.checkpoints]
+
+    def keys(self) -> set[tuple]:
+        return {
+            (self.method, self.task, self.name, step, seed, repetition)
+            for step in self.steps
+            for seed in seed_list(self.seeds)
+            for repetition in range(self.repetitions)
+        }
+
+
+def _record_key(record: Mapping[str, Any]) -> tuple:
+    """What identifies an episode record: its run (method, task, run), checkpoint, seed and repetition."""
+    return (
+        *(str(record[key]) for key in ("method", "task", "run")),
+        *(int(record[key]) for key in ("step", "seed", "repetition")),
+    )
+
+
+def _merge(old: Sequence[dict], new: Sequence[dict], key: Callable[[Mapping[str, Any]], tuple]) -> tuple[list, int]:
+    """``old`` rows whose key is not among ``new``'s, then ``new``; and how many old rows were replaced."""
+    fresh = {key(row) for row in new}
+    kept = [row for row in old if key(row) not in fresh]
+    return [*kept, *new], len(old) - len(kept)
+
+
+def _existing(out: Path) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The records and the summary a results directory holds already (none for a new directory)."""
+    episodes, summary = out / "episodes.csv", out / "summary.json"
+    records = read_records(episodes) if episodes.is_file() else []
+    if records:
+        read_episodes(out)  # refuses a malformed file by name before anything is evaluated
+    found: dict[str, Any] = {}
+    if summary.is_file():
+        try:
+            found = json.loads(summary.read_text())
+        except json.JSONDecodeError as err:
+            raise ValueError(f"{summary} is not valid JSON ({err}); move it away to evaluate into {out}") from None
+    return records, found
+
+
+def _taken(summary: Mapping[str, Any]) -> dict[tuple[str, str, str], str]:
+    return {
+        (str(entry["method"]), str(entry["task"]), str(entry["run"])): str(entry["directory"])
+        for entry in summary.get("run_directories", [])
+    }
+
+
 def evaluate_runs(
     run_dirs: Sequence[Path],
     out: Path,
@@ -237,64 +339,123 @@ def evaluate_runs(
     videos: int = 3,
     device: str = "cpu",
     progress: bool = False,
+    force: bool = False,
     echo: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
-    """Evaluate checkpoints of several runs on novel seeds; write ``out/episodes.csv`` and ``out/summary.json``
-    (atomically) and return the summary. Defaults come from each run's own ``eval`` block; ``echo`` receives what
-    is evaluated (the inclusive seed range, checkpoints)."""
+    """Evaluate checkpoints of several runs on novel seeds and merge the records into the results directory ``out``;
+    returns its new summary. Defaults come from each run's own ``eval`` block.
+
+    * ``episodes.csv``: one row per episode, keyed by (method, task, run, step, seed, repetition). Rows of other runs
+      and checkpoints are kept; rows with the key of a new one are replaced only with ``force`` (without it, a
+      ValueError before anything is evaluated).
+    * ``summary.json``: :func:`agents.results.summarize` over all the merged records, which directory each run name
+      stands for (``run_directories``, see :func:`unique_run_names`), this evaluation and the earlier ones.
+
+    Every file is written atomically, after the merged records were checked. ``echo`` receives what is evaluated
+    (the inclusive seed range, checkpoints) and what the merge kept and replaced."""
     say = echo or (lambda message: None)
     if repetitions is not None and repetitions < 1:
         raise ValueError(f"repetitions={repetitions} is invalid: expected a whole number >= 1")
     if video is not None and videos < 1:
         raise ValueError(f"videos={videos} is invalid: expected a whole number >= 1 (episodes per checkpoint)")
     check_device(device)
+    directories = [Path(run) for run in run_dirs]
+    seen: dict[Path, Path] = {}
+    for directory in directories:
+        if directory.resolve() in seen:
+            raise ValueError(f"{seen[directory.resolve()]} and {directory} are the same run directory: give it once")
+        seen[directory.resolve()] = directory
     plans = []
-    for run_dir in run_dirs:  # every run's input is checked before anything is evaluated
-        config = run_config(run_dir)
+    for directory in directories:
+        config = run_config(directory)
         seed_range = parse_seed_range(seeds) if seeds else config.eval_seeds
         check_disjoint_seeds(config.env.train_seeds, seed_range)
-        reps = config.eval.repetitions if repetitions is None else repetitions
-        plans.append((run_dir, config, seed_range, reps, select_checkpoints(run_dir, checkpoints, config.batch_size)))
-    records: list[dict[str, Any]] = []
-    for run_dir, config, seed_range, reps, chosen in plans:
-        steps = [checkpoint_update(path) * config.batch_size for path in chosen]
-        say(
-            f"run {run_dir.name} ({run_dir}): {describe_seeds(seed_range)} x {reps} repetitions, "
-            f"checkpoint(s) at step(s) {', '.join(map(str, steps))}"
+        plans.append(
+            _Plan(
+                directory,
+                config,
+                method or config.method,
+                task or config.task,
+                seed_range,
+                config.eval.repetitions if repetitions is None else repetitions,
+                select_checkpoints(directory, checkpoints, config.batch_size),
+            )
         )
-        for path in chosen:
-            policy = load_policy(run_dir, path, device)
-            recorder = EpisodeVideo(min(videos, reps * (seed_range[1] - seed_range[0] + 1))) if video else None
+    old_records, old_summary = _existing(out)
+    taken = _taken(old_summary)
+    names = unique_run_names(directories, [(plan.method, plan.task) for plan in plans], taken)
+    for plan, name in zip(plans, names, strict=True):
+        plan.name = name
+    planned = set().union(*(plan.keys() for plan in plans))
+    clashes = [record for record in old_records if _record_key(record) in planned]
+    if clashes and not force:
+        first = dict(zip(("method", "task", "run", "step", "seed", "repetition"), _record_key(clashes[0]), strict=True))
+        raise ValueError(
+            f"{out / 'episodes.csv'} already holds {len(clashes)} of the records this evaluation would write (e.g. "
+            + ", ".join(f"{key}={value}" for key, value in first.items())
+            + "): give --force to replace them, or another --out directory"
+        )
+
+    stems = [plan.name.replace("/", "-") for plan in plans]  # GIF names, unique among this evaluation's runs
+    stems = [f"{p.method}-{p.task}-{s}" if stems.count(s) > 1 else s for p, s in zip(plans, stems, strict=True)]
+    records: list[dict[str, Any]] = []
+    for plan, stem in zip(plans, stems, strict=True):
+        say(
+            f"run {plan.name} ({plan.directory}): {describe_seeds(plan.seeds)} x {plan.repetitions} repetitions, "
+            f"checkpoint(s) at step(s) {', '.join(map(str, plan.steps))}"
+        )
+        for path in plan.checkpoints:
+            policy = load_policy(plan.directory, path, device)
+            count = len(seed_list(plan.seeds)) * plan.repetitions
+            recorder = EpisodeVideo(min(videos, count)) if video else None
             found = evaluate(
                 policy.model,
                 policy.helm,
                 policy.config,
-                seed_list(seed_range),
-                reps,
+                seed_list(plan.seeds),
+                plan.repetitions,
                 greedy=greedy,
-                sampling_seed=config.eval.seed if sampling_seed is None else sampling_seed,
+                sampling_seed=plan.config.eval.seed if sampling_seed is None else sampling_seed,
                 step=policy.step,
-                run=run_dir.name,
+                run=plan.name,
                 device=device,
                 progress=progress,
                 on_frame=recorder,
             )
             for record in found:
-                record["method"] = method or record["method"]
-                record["task"] = task or record["task"]
+                record["method"], record["task"] = plan.method, plan.task
             records.extend(found)
             if recorder is not None and video is not None:
-                recorder.write(video, f"{run_dir.name}-step{policy.step}", found)
-    write_records(out / "episodes.csv", records)
-    summary = summarize_episodes(read_episodes(out))
+                recorder.write(video, f"{stem}-step{policy.step}", found)
+    merged, replaced = _merge(old_records, records, _record_key)
+    if old_records:
+        say(
+            f"{out / 'episodes.csv'}: kept {len(old_records) - replaced} earlier record(s), replaced {replaced}, "
+            f"added {len(records) - replaced}"
+        )
+    with tempfile.TemporaryDirectory() as scratch:  # the merged records are checked before out is touched
+        write_records(Path(scratch) / "episodes.csv", merged)
+        try:
+            summary = summarize_episodes(read_episodes(scratch))
+        except ValueError as err:
+            raise ValueError(f"the records of {out} and of this evaluation do not fit together: {err}") from None
+    registry = {**taken, **{(p.method, p.task, p.name): str(p.directory.resolve()) for p in plans}}
+    summary["run_directories"] = [
+        {"method": key[0], "task": key[1], "run": key[2], "directory": path} for key, path in sorted(registry.items())
+    ]
     summary["evaluation"] = {
         "runs": [str(run) for run in run_dirs],
+        "names": [plan.name for plan in plans],
         "seeds": seeds,
         "repetitions": repetitions,
         "checkpoints": checkpoints,
         "greedy": greedy,
+        "replaced": replaced,
         **provenance(),
     }
+    earlier = list(old_summary.get("earlier_evaluations", []))
+    summary["earlier_evaluations"] = earlier + ([old_summary["evaluation"]] if "evaluation" in old_summary else [])
+    write_records(out / "episodes.csv", merged)
     write_json_atomic(out / "summary.json", summary, sort_keys=False)
     return summary
 

@@ -1,12 +1,16 @@
 """Score trained runs on novel seeds, the paper's way (30 seeds x 5 repetitions, actions sampled).
 
     python scripts/evaluate.py --run DIR [DIR ...] [--seeds LOW..HIGH | LOW:HIGH] [--repetitions 5]
-        [--checkpoints last|all|STEP,...] [--greedy] [--out DIR] [--method NAME] [--task NAME] [--video DIR]
+        [--checkpoints last|all|STEP,...] [--greedy] [--out DIR] [--force] [--method NAME] [--task NAME]
+        [--video DIR]
 
 Every run is rebuilt from its own saved config and checkpoint(s) (memory module, frame stack, HELM branch), and
-all seed x repetition episodes of a checkpoint play at once in one batched environment. Writes
-``OUT/episodes.csv`` (one record per episode) and ``OUT/summary.json`` (per run and checkpoint: mean, IQM and the
-paper's metric; IQM with 95% stratified-bootstrap intervals across runs per method and task), both atomically.
+all seed x repetition episodes of a checkpoint play at once in one batched environment. The records are merged into
+``OUT/episodes.csv`` (one row per episode: rows of other runs and checkpoints already there are kept; rows of the
+same run, step, seed and repetition are replaced only with ``--force``), and ``OUT/summary.json`` is recomputed
+over all of them (per run and checkpoint: mean, IQM and the paper's metric; IQM with 95% stratified-bootstrap intervals
+across runs per method and task); every file is written atomically. A run is named after its directory (``seed1``),
+or by the shortest path suffix that sets it apart from another run of the same method and task (``a/seed1``).
 The default seeds are the run's ``eval`` seeds (30 right after ``env.train_seeds`` unless the config names others);
 the resolved inclusive range is printed, and seeds that overlap the training range are refused. ``--video DIR``
 writes GIFs of the first episodes: the agent's view beside the ground truth, with the step, action, reward and
@@ -85,6 +89,9 @@ def main(argv: list[str] | None = None) -> int:
         help="seed of the action sampling, >= 0 (default: the run's eval.seed)",
     )
     parser.add_argument("--out", help="results directory (default: DIR/evaluation for a single run)")
+    parser.add_argument(
+        "--force", action="store_true", help="replace records of the same run, step, seed and repetition in --out"
+    )
     parser.add_argument("--method", help="method name in the records (default: from each run's config)")
     parser.add_argument("--task", help="task name in the records (default: from each run's config)")
     parser.add_argument("--video", metavar="DIR", help="write GIFs of a few episodes per checkpoint into DIR")
@@ -112,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
             videos=args.videos,
             device=args.device,
             progress=not args.no_progress,
+            force=args.force,
             echo=print,
         )
     except (ConfigError, FileNotFoundError, ValueError) as err:

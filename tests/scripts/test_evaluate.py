@@ -1,9 +1,10 @@
-"""scripts/evaluate.py on tiny trained runs: merging into a results directory, run names, training logs for the
-curves, argument checks and the printed seed range."""
+"""scripts/evaluate.py on tiny trained runs: merging into a results directory, run names, argument checks and the
+printed seed range."""
 
 from __future__ import annotations
 
 import copy
+import json
 import shutil
 from pathlib import Path
 
@@ -11,7 +12,8 @@ import pytest
 import torch
 
 from agents.config import config_from_dict
-from agents.evaluation import evaluate_runs, read_records
+from agents.evaluation import evaluate_runs, read_records, unique_run_names
+from agents.results import read_episodes
 from agents.trainer import Trainer
 from scripts import evaluate as evaluate_script
 from tests.agents.test_evaluation import TINY
@@ -41,6 +43,64 @@ def keys(directory: Path) -> set[tuple]:
     return {
         (r["method"], r["run"], r["step"], r["seed"], r["repetition"]) for r in read_records(directory / "episodes.csv")
     }
+
+
+def test_a_second_run_evaluated_into_the_same_directory_keeps_the_first_one_s_records(
+    runs: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """B5: rows of other runs and checkpoints stay; rows of the same key are replaced only with --force, and the
+    summary covers all the records."""
+    out = tmp_path / "results"
+    assert evaluate("--run", str(runs["ppo"]), "--out", str(out)) == 0
+    assert evaluate("--run", str(runs["gru"]), "--out", str(out), "--checkpoints", "64") == 0
+    assert "kept 12 earlier record(s), replaced 0, added 12" in capsys.readouterr().out
+    both = keys(out)
+    assert {(method, step) for method, _, step, _, _ in both} == {("ppo", 128), ("gru", 64)} and len(both) == 24
+    summary = json.loads((out / "summary.json").read_text())
+    assert sorted((row["method"], row["step"]) for row in summary["runs"]) == [("gru", 64), ("ppo", 128)]
+    assert len(summary["earlier_evaluations"]) == 1
+
+    files = {name: (out / name).read_bytes() for name in ("episodes.csv", "summary.json")}
+    assert evaluate("--run", str(runs["gru"]), "--out", str(out), "--checkpoints", "64,128") == 2
+    error = capsys.readouterr().err
+    assert "already holds 12 of the records" in error and "run=seed1, step=64" in error
+    assert "give --force to replace them, or another --out directory" in error
+    assert {name: (out / name).read_bytes() for name in files} == files, "a refused evaluation changes nothing"
+
+    assert evaluate("--run", str(runs["gru"]), "--out", str(out), "--checkpoints", "64,128", "--force") == 0
+    assert "kept 12 earlier record(s), replaced 12, added 12" in capsys.readouterr().out
+    assert len(keys(out)) == 36 == len(read_records(out / "episodes.csv"))  # replaced, not doubled
+    assert len(read_episodes(out)) == 36
+
+
+def test_runs_in_directories_of_the_same_name_get_distinct_names(runs: dict[str, Path], tmp_path: Path) -> None:
+    """C7: runs/a/seed1 and runs/b/seed1, together or one after the other, never read as one run twice."""
+    together = tmp_path / "together"
+    assert evaluate("--run", str(runs["a"]), str(runs["b"]), "--out", str(together)) == 0
+    assert {r["run"] for r in read_records(together / "episodes.csv")} == {"a/seed1", "b/seed1"}
+    assert len(read_episodes(together)) == 24
+
+    apart = tmp_path / "apart"
+    assert evaluate("--run", str(runs["a"]), "--out", str(apart)) == 0
+    assert evaluate("--run", str(runs["b"]), "--out", str(apart)) == 0  # no --force needed: another run
+    assert evaluate("--run", str(runs["a"]), "--out", str(apart)) == 2  # the same run again: refused
+    assert {r["run"] for r in read_records(apart / "episodes.csv")} == {"seed1", "b/seed1"}
+    assert len(read_episodes(apart)) == 24
+    summary = json.loads((apart / "summary.json").read_text())
+    assert {entry["run"]: entry["directory"] for entry in summary["run_directories"]} == {
+        "seed1": str(runs["a"].resolve()),
+        "b/seed1": str(runs["b"].resolve()),
+    }
+    assert evaluate("--run", str(runs["a"]), str(runs["a"].parent / ".." / "a" / "seed1"), "--out", str(apart)) == 2
+
+
+def test_run_names_stay_short_where_method_or_task_tell_runs_apart() -> None:
+    sweep = [Path("/r/panel/gru/T/seed0"), Path("/r/panel/ppo/T/seed0"), Path("/r/panel/gru/T/seed1")]
+    assert unique_run_names(sweep, [("gru", "T"), ("ppo", "T"), ("gru", "T")]) == ["seed0", "seed0", "seed1"]
+    nested = [Path("/x/a/seed1"), Path("/y/x/a/seed1"), Path("/z/b/seed1")]
+    assert unique_run_names(nested, [("m", "T")] * 3) == ["/x/a/seed1", "y/x/a/seed1", "b/seed1"]
+    taken = {("m", "T", "seed1"): "/elsewhere/seed1", ("m", "T", "b/seed1"): "/z/b/seed1"}
+    assert unique_run_names([Path("/z/b/seed1"), Path("/w/seed1")], [("m", "T")] * 2, taken) == ["b/seed1", "w/seed1"]
 
 
 @pytest.mark.parametrize(
