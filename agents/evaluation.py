@@ -29,7 +29,7 @@ from agents.config import Config, check_disjoint_seeds
 from agents.io import atomic_write_bytes, atomic_write_text, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.models import ActorCritic
-from agents.results import EPISODE_COLUMNS, read_episodes
+from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS, read_episodes
 from agents.results import summarize as summarize_episodes
 
 RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
@@ -295,6 +295,24 @@ def _record_key(record: Mapping[str, Any]) -> tuple:
     )
 
 
+def _training_key(row: Mapping[str, Any]) -> tuple:
+    return (*(str(row[key]) for key in ("method", "task", "run")), int(float(row["step"])))
+
+
+def _read_rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def _csv_text(columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
+    extra = sorted({key for row in rows for key in row} - set(columns))
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=[*columns, *extra], lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return text.getvalue()
+
+
 def _merge(old: Sequence[dict], new: Sequence[dict], key: Callable[[Mapping[str, Any]], tuple]) -> tuple[list, int]:
     """``old`` rows whose key is not among ``new``'s, then ``new``; and how many old rows were replaced."""
     fresh = {key(row) for row in new}
@@ -348,6 +366,8 @@ def evaluate_runs(
     * ``episodes.csv``: one row per episode, keyed by (method, task, run, step, seed, repetition). Rows of other runs
       and checkpoints are kept; rows with the key of a new one are replaced only with ``force`` (without it, a
       ValueError before anything is evaluated).
+    * ``training.csv``: the runs' ``training.csv`` rows, merged by (method, task, run, step), for the training-seed
+      curves of ``scripts/plot.py``.
     * ``summary.json``: :func:`agents.results.summarize` over all the merged records, which directory each run name
       stands for (``run_directories``, see :func:`unique_run_names`), this evaluation and the earlier ones.
 
@@ -399,6 +419,7 @@ def evaluate_runs(
     stems = [plan.name.replace("/", "-") for plan in plans]  # GIF names, unique among this evaluation's runs
     stems = [f"{p.method}-{p.task}-{s}" if stems.count(s) > 1 else s for p, s in zip(plans, stems, strict=True)]
     records: list[dict[str, Any]] = []
+    training: list[dict[str, Any]] = []
     for plan, stem in zip(plans, stems, strict=True):
         say(
             f"run {plan.name} ({plan.directory}): {describe_seeds(plan.seeds)} x {plan.repetitions} repetitions, "
@@ -427,12 +448,20 @@ def evaluate_runs(
             records.extend(found)
             if recorder is not None and video is not None:
                 recorder.write(video, f"{stem}-step{policy.step}", found)
+        log = plan.directory / "training.csv"
+        if log.is_file():  # the runs' training logs make the training-seed panel of the curves
+            training += [{**row, "run": plan.name, "method": plan.method, "task": plan.task} for row in _read_rows(log)]
+        else:
+            say(f"note: {plan.directory} has no training.csv: no training-seed curve for run {plan.name}")
+
     merged, replaced = _merge(old_records, records, _record_key)
     if old_records:
         say(
             f"{out / 'episodes.csv'}: kept {len(old_records) - replaced} earlier record(s), replaced {replaced}, "
             f"added {len(records) - replaced}"
         )
+    old_training = _read_rows(out / "training.csv") if (out / "training.csv").is_file() else []
+    merged_training, _ = _merge(old_training, training, _training_key)
     with tempfile.TemporaryDirectory() as scratch:  # the merged records are checked before out is touched
         write_records(Path(scratch) / "episodes.csv", merged)
         try:
@@ -456,6 +485,8 @@ def evaluate_runs(
     earlier = list(old_summary.get("earlier_evaluations", []))
     summary["earlier_evaluations"] = earlier + ([old_summary["evaluation"]] if "evaluation" in old_summary else [])
     write_records(out / "episodes.csv", merged)
+    if merged_training:
+        atomic_write_text(out / "training.csv", _csv_text(TRAINING_COLUMNS, merged_training))
     write_json_atomic(out / "summary.json", summary, sort_keys=False)
     return summary
 

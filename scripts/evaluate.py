@@ -7,8 +7,9 @@
 Every run is rebuilt from its own saved config and checkpoint(s) (memory module, frame stack, HELM branch), and
 all seed x repetition episodes of a checkpoint play at once in one batched environment. The records are merged into
 ``OUT/episodes.csv`` (one row per episode: rows of other runs and checkpoints already there are kept; rows of the
-same run, step, seed and repetition are replaced only with ``--force``), and ``OUT/summary.json`` is recomputed
-over all of them (per run and checkpoint: mean, IQM and the paper's metric; IQM with 95% stratified-bootstrap intervals
+same run, step, seed and repetition are replaced only with ``--force``), the runs' training logs into
+``OUT/training.csv`` (the training-seed curves of ``scripts/plot.py``), and ``OUT/summary.json`` is recomputed over
+all of them (per run and checkpoint: mean, IQM and the paper's metric; IQM with 95% stratified-bootstrap intervals
 across runs per method and task); every file is written atomically. A run is named after its directory (``seed1``),
 or by the shortest path suffix that sets it apart from another run of the same method and task (``a/seed1``).
 The default seeds are the run's ``eval`` seeds (30 right after ``env.train_seeds`` unless the config names others);
@@ -127,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(format_table(summary["runs"], ["run", "method", "task", "step", "episodes", "mean", "iqm", "metric"]))
     print(format_table(summary["aggregate"]))
-    print(f"wrote {out / 'episodes.csv'} and {out / 'summary.json'}")
+    written = [out / name for name in ("episodes.csv", "training.csv", "summary.json") if (out / name).is_file()]
+    print("wrote " + ", ".join(map(str, written)))
     return 0
 
 

@@ -1,9 +1,10 @@
-"""scripts/evaluate.py on tiny trained runs: merging into a results directory, run names, argument checks and the
-printed seed range."""
+"""scripts/evaluate.py on tiny trained runs: merging into a results directory, run names, training logs for the
+curves, argument checks and the printed seed range."""
 
 from __future__ import annotations
 
 import copy
+import csv
 import json
 import shutil
 from pathlib import Path
@@ -13,7 +14,8 @@ import torch
 
 from agents.config import config_from_dict
 from agents.evaluation import evaluate_runs, read_records, unique_run_names
-from agents.results import read_episodes
+from agents.plots import curves_figure
+from agents.results import read_episodes, read_results
 from agents.trainer import Trainer
 from scripts import evaluate as evaluate_script
 from tests.agents.test_evaluation import TINY
@@ -60,7 +62,7 @@ def test_a_second_run_evaluated_into_the_same_directory_keeps_the_first_one_s_re
     assert sorted((row["method"], row["step"]) for row in summary["runs"]) == [("gru", 64), ("ppo", 128)]
     assert len(summary["earlier_evaluations"]) == 1
 
-    files = {name: (out / name).read_bytes() for name in ("episodes.csv", "summary.json")}
+    files = {name: (out / name).read_bytes() for name in ("episodes.csv", "training.csv", "summary.json")}
     assert evaluate("--run", str(runs["gru"]), "--out", str(out), "--checkpoints", "64,128") == 2
     error = capsys.readouterr().err
     assert "already holds 12 of the records" in error and "run=seed1, step=64" in error
@@ -79,6 +81,8 @@ def test_runs_in_directories_of_the_same_name_get_distinct_names(runs: dict[str,
     assert evaluate("--run", str(runs["a"]), str(runs["b"]), "--out", str(together)) == 0
     assert {r["run"] for r in read_records(together / "episodes.csv")} == {"a/seed1", "b/seed1"}
     assert len(read_episodes(together)) == 24
+    training = read_results(together).training
+    assert training is not None and set(training["run"].tolist()) == {"a/seed1", "b/seed1"}
 
     apart = tmp_path / "apart"
     assert evaluate("--run", str(runs["a"]), "--out", str(apart)) == 0
@@ -101,6 +105,25 @@ def test_run_names_stay_short_where_method_or_task_tell_runs_apart() -> None:
     assert unique_run_names(nested, [("m", "T")] * 3) == ["/x/a/seed1", "y/x/a/seed1", "b/seed1"]
     taken = {("m", "T", "seed1"): "/elsewhere/seed1", ("m", "T", "b/seed1"): "/z/b/seed1"}
     assert unique_run_names([Path("/z/b/seed1"), Path("/w/seed1")], [("m", "T")] * 2, taken) == ["b/seed1", "w/seed1"]
+
+
+def test_the_readme_workflow_gives_curves_with_both_panels(runs: dict[str, Path], tmp_path: Path) -> None:
+    """C9: evaluate --out DIR, then plot DIR: the runs' training logs are there under the episodes' run names."""
+    out = tmp_path / "mine"
+    assert evaluate("--run", str(runs["gru"]), str(runs["ppo"]), "--checkpoints", "all", "--out", str(out)) == 0
+    with (runs["gru"] / "training.csv").open() as handle:
+        logged = len(list(csv.DictReader(handle)))
+    loaded = read_results(out)
+    assert loaded.training is not None and len(loaded.training) == 2 * logged
+    assert set(loaded.training["run"].tolist()) == set(loaded.episodes["run"].tolist()) == {"seed1"}
+    assert set(loaded.training["method"].tolist()) == {"gru", "ppo"}
+    figure = curves_figure(loaded.episodes, loaded.training, reps=20)
+    titles = [axes.get_title() for axes in figure.axes]
+    assert any(title.endswith("training seeds") for title in titles), titles
+    assert any(title.endswith("novel seeds") for title in titles), titles
+    # a second evaluation of the same run merges the log instead of repeating it
+    assert evaluate("--run", str(runs["gru"]), "--checkpoints", "128", "--out", str(out), "--force") == 0
+    assert len(read_results(out).training) == 2 * logged
 
 
 @pytest.mark.parametrize(
