@@ -105,6 +105,36 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     return state
 
 
+def check_checkpoint_config(state: dict[str, Any], config: Config, path: str | Path) -> int | None:
+    """That the checkpoint at ``path`` was written by ``config`` (the run's ``config.yaml``). One difference is
+    allowed: ``run.total_steps`` raised since, i.e. the run was extended after this checkpoint (``train.py --resume
+    DIR --set run.total_steps=N``). Returns the checkpoint's number of updates in that case, else None."""
+    saved, current = state["config"], config_to_dict(config)
+    if saved == current:
+        return None
+    saved_steps = saved.get("run", {}).get("total_steps")
+    same_but_length = {**saved, "run": {**saved["run"], "total_steps": current["run"]["total_steps"]}} == current
+    if not same_but_length:
+        keys = ", ".join(_differing_keys(saved, current)) or "?"
+        raise ValueError(f"{path} was written by a different config than the run's config.yaml (differing: {keys})")
+    saved_updates = saved_steps // config.batch_size
+    if saved_updates > config.num_updates:
+        raise ValueError(
+            f"{path} belongs to a run of run.total_steps={saved_steps} ({saved_updates} updates), longer than the "
+            f"run's config.yaml says ({config.run.total_steps}, {config.num_updates} updates): a run can be "
+            "extended, not shortened"
+        )
+    return saved_updates if saved_updates < config.num_updates else None
+
+
+def _differing_keys(a: Any, b: Any, prefix: str = "") -> list[str]:
+    """The dotted keys at which two nested dicts differ."""
+    if not (isinstance(a, dict) and isinstance(b, dict)):
+        return [] if a == b else [prefix or "(config)"]
+    keys = list(a) + [key for key in b if key not in a]
+    return [k for key in keys for k in _differing_keys(a.get(key), b.get(key), f"{prefix}.{key}" if prefix else key)]
+
+
 def finished_update(run_dir: str | Path) -> int | None:
     """The last update of a run that completed (``run_info.json``'s ``finished``), else None."""
     path = Path(run_dir) / "run_info.json"
@@ -145,8 +175,7 @@ def load_policy(
     if path is None:
         raise FileNotFoundError(f"{run_dir} holds no checkpoint (checkpoints/{CHECKPOINT_GLOB})")
     state = read_checkpoint(path)
-    if state["config"] != config_to_dict(config):
-        raise ValueError(f"{path} was written by a different config than {run_dir / 'config.yaml'}")
+    check_checkpoint_config(state, config, path)
     import envs
 
     spec_core = envs.make_core(config.env.id, 1, config.env.options)

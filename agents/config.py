@@ -48,7 +48,7 @@ import math
 import numbers
 import re
 import types
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union, get_args, get_origin, get_type_hints
@@ -80,20 +80,35 @@ def param(default: Any, doc: str, low: float | None = None, high: float | None =
 class Schedule:
     """A value that decays linearly from ``initial`` to ``final`` over ``decay_updates`` PPO updates.
 
-    In YAML a plain number is a constant; ``{initial: 3.0e-4, final: 1.0e-4}`` decays over the whole run.
+    In YAML a plain number is a constant; ``{initial: 3.0e-4, final: 1.0e-4}`` decays over the whole run. When a run
+    is lengthened (``train.py --resume DIR --set run.total_steps=N``), a schedule that decays over the whole run goes
+    on from the value it has reached to ``final`` at the new end (see :meth:`value`).
     """
 
     initial: float = param(0.0, "value at the first update", low=0.0)
     final: float | None = param(None, "value reached after decay_updates updates (null: constant)", low=0.0)
     decay_updates: int | None = param(None, "updates until final is reached (null: the whole run)", low=1)
 
-    def value(self, update: int, num_updates: int) -> float:
-        """The value used by update ``update`` (0-based) of a run of ``num_updates`` updates."""
+    def value(self, update: int, num_updates: int, extensions: Sequence[tuple[int, int]] = ()) -> float:
+        """The value used by update ``update`` (0-based) of a run of ``num_updates`` updates.
+
+        ``extensions``: ``(at_update, previous_num_updates)`` for every time the run was lengthened, oldest first.
+        From ``at_update`` on, a schedule that decays over the whole run goes linearly from the value it had reached
+        there to ``final`` at the new end, so it never jumps back up (a finished run that is extended stays at
+        ``final``). ``decay_updates`` is a number of updates, which an extension does not move."""
         if self.final is None:
             return self.initial
-        horizon = self.decay_updates or num_updates
-        progress = min(update / horizon, 1.0)
-        return self.initial + (self.final - self.initial) * progress
+        if self.decay_updates:
+            return self.initial + (self.final - self.initial) * min(update / self.decay_updates, 1.0)
+        starts = [0, *(at for at, _ in extensions)]
+        ends = [*(previous for _, previous in extensions), num_updates]
+        value = self.initial
+        for k, (start, end) in enumerate(zip(starts, ends, strict=True)):
+            until = update if k + 1 == len(starts) or update < starts[k + 1] else starts[k + 1]
+            value = value + (self.final - value) * min((until - start) / (end - start), 1.0)
+            if until == update:
+                break
+        return value
 
 
 @dataclass

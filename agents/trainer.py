@@ -10,6 +10,10 @@ generator, the episode each slot is in (its seed and the actions taken since it 
 reset with its seed and replayed, which reproduces the environment state because a slot's episode depends only on
 its seed and actions (a digest of the observations checks this). With the same seed on CPU, a resumed run ends with
 the same weights, logs and records as an uninterrupted one.
+
+A run can be lengthened when it resumes (``Trainer.resume(run_dir, ["run.total_steps=N"])``, :data:`EXTENDABLE`):
+``config.yaml`` then holds the new length, ``run_info.json`` records the extension, and the schedules that decay over
+the whole run go on from their current values to their final values at the new end (:meth:`Schedule.value`).
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import random
 import sys
 import time
 from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,14 +42,16 @@ from agents.actor import Actor, refresh_copy, rollout_copy
 from agents.buffer import RolloutBuffer
 from agents.checkpoint import (
     build_agent,
+    check_checkpoint_config,
     check_helm,
     checkpoint_path,
+    checkpoint_update,
     latest_checkpoint,
     read_checkpoint,
     run_config,
     write_checkpoint,
 )
-from agents.config import Config, config_to_dict, dump_config
+from agents.config import Config, ConfigError, config_from_dict, config_to_dict, dump_config, parse_override
 from agents.evaluation import evaluate, read_records, record_means, seed_list, write_records
 from agents.io import atomic_write_text, now, provenance, write_json_atomic
 from agents.metrics import metric_of
@@ -53,6 +60,7 @@ from agents.results import TRAINING_COLUMNS
 from agents.sequences import split_sequences
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
+EXTENDABLE = ("run.total_steps",)  # the only keys a resume may change: a longer run, everything else as trained
 
 
 class TrainingDiverged(RuntimeError):
@@ -74,6 +82,9 @@ class Trainer:
         self.num_updates = config.num_updates
         self.update = 0
         self.global_step = 0
+        # (at update, previous num_updates) of every time the run was lengthened: the schedules need them
+        self.extensions: list[tuple[int, int]] = []
+        self.extension: dict[str, Any] | None = None  # the extension made by Trainer.resume, if any (run_info record)
 
         seed = config.run.seed
         torch.manual_seed(seed)  # the weight init; every later draw uses the generators below
@@ -109,16 +120,27 @@ class Trainer:
 
     # ------------------------------------------------------------------------------------------------ public
     @classmethod
-    def resume(cls, run_dir: str | Path) -> Trainer:
-        """The trainer of ``run_dir`` restored from its newest checkpoint."""
+    def resume(cls, run_dir: str | Path, overrides: Sequence[str] = ()) -> Trainer:
+        """The trainer of ``run_dir`` restored from its newest checkpoint. ``overrides`` (``key=value``) may only
+        raise ``run.total_steps`` (:data:`EXTENDABLE`): the run is then extended from that checkpoint on
+        (:func:`extend_run`), finished or not; any other key is a :class:`ConfigError` naming it."""
         run_dir = Path(run_dir)
         config = run_config(run_dir)
         path = latest_checkpoint(run_dir)
         if path is None:
             raise FileNotFoundError(f"{run_dir} holds no checkpoint to resume from (checkpoints/update_*.pt)")
+        extension = None
+        if overrides:
+            config, extension = extend_run(run_dir, config, overrides, checkpoint_update(path))
         trainer = cls(config, run_dir)
         trainer.load_checkpoint(path)
+        trainer.extension = extension
         return trainer
+
+    @property
+    def finished(self) -> bool:
+        """Whether every update of the run is done (a finished run's train() does nothing)."""
+        return self.update >= self.num_updates
 
     @property
     def sequence_length(self) -> int | None:
@@ -134,7 +156,10 @@ class Trainer:
         return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=enabled)
 
     def train(self) -> list[dict[str, float]]:
-        """Run the remaining updates; returns one metrics dict per update run by this call."""
+        """Run the remaining updates; returns one metrics dict per update run by this call. A finished run is left
+        exactly as it is (no resume record, no event file): lengthen it with ``Trainer.resume(dir, overrides)``."""
+        if self.finished:
+            return []
         self._write_run_files()
         self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
         writer = _summary_writer(self.run_dir, self.global_step)
@@ -192,9 +217,9 @@ class Trainer:
     def train_update(self) -> dict[str, float]:
         """One update: collect a rollout, compute advantages, run the PPO epochs. Returns its metrics."""
         config, update = self.config, self.update
-        learning_rate = config.ppo.learning_rate.value(update, self.num_updates)
-        entropy_coef = config.ppo.entropy_coef.value(update, self.num_updates)
-        clip = config.ppo.clip_range.value(update, self.num_updates)
+        learning_rate = self.schedule("learning_rate", update)
+        entropy_coef = self.schedule("entropy_coef", update)
+        clip = self.schedule("clip_range", update)
         for group in self.optimizer.param_groups:
             group["lr"] = learning_rate
 
@@ -252,6 +277,10 @@ class Trainer:
         metrics["global_step"] = float(self.global_step)
         metrics["update"] = float(self.update)
         return metrics
+
+    def schedule(self, name: str, update: int) -> float:
+        """The value of the schedule ``ppo.<name>`` at ``update`` (0-based), this run's extensions included."""
+        return getattr(self.config.ppo, name).value(update, self.num_updates, self.extensions)
 
     def _collect_rollout(self) -> list[dict[str, Any]]:
         """Fill the buffer with ``worker_steps`` decisions of every worker; returns the final infos of ended
@@ -322,10 +351,9 @@ class Trainer:
             "model": self.model.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "schedules": {
-                "learning_rate": self.config.ppo.learning_rate.value(self.update, self.num_updates),
-                "entropy_coef": self.config.ppo.entropy_coef.value(self.update, self.num_updates),
-                "clip_range": self.config.ppo.clip_range.value(self.update, self.num_updates),
+                name: self.schedule(name, self.update) for name in ("learning_rate", "entropy_coef", "clip_range")
             },
+            "extensions": [list(extension) for extension in self.extensions],
             "rng": {  # the global generators are unused after the init, but saved so code that uses them resumes too
                 "torch": torch.get_rng_state(),
                 "numpy": np.random.get_state(),  # noqa: NPY002
@@ -345,10 +373,12 @@ class Trainer:
 
     def load_checkpoint(self, path: str | Path) -> None:
         state = read_checkpoint(path)
-        if state["config"] != config_to_dict(self.config):
-            raise ValueError(f"{path} was written by a different config than {self.run_dir / 'config.yaml'}")
+        lengthened_from = check_checkpoint_config(state, self.config, path)  # config.yaml may hold a longer run
         check_helm(self.helm, state, path)
         self.update, self.global_step = state["update"], state["global_step"]
+        self.extensions = [(int(at), int(previous)) for at, previous in state.get("extensions", [])]
+        if lengthened_from is not None:  # extended after this checkpoint was written: from its update on
+            self.extensions.append((self.update, lengthened_from))
         self.model.load_state_dict(state["model"])
         refresh_copy(self.rollout_model, self.model)
         self.optimizer.load_state_dict(state["optimizer"])
@@ -389,6 +419,47 @@ class Trainer:
 
 
 # ----------------------------------------------------------------------------------------------- helpers
+def extend_run(
+    run_dir: Path, config: Config, overrides: Sequence[str], update: int
+) -> tuple[Config, dict[str, Any] | None]:
+    """Lengthen the run in ``run_dir`` (saved config ``config``, newest checkpoint at ``update``) by ``overrides``,
+    which may only set :data:`EXTENDABLE` keys and must add at least one update. Writes the new ``config.yaml`` and
+    records the extension in ``run_info.json`` (``extended``: when, at which update and step, old and new length;
+    its ``finished`` entry goes, since the run is not any more). Returns the new config and that record."""
+    for item in overrides:
+        key, _ = parse_override(item)
+        if key not in EXTENDABLE:
+            raise ConfigError(
+                f"{key} cannot be changed on resume: the run goes on with the config saved in "
+                f"{run_dir / 'config.yaml'}; only {', '.join(EXTENDABLE)} can be set, to lengthen the run"
+            )
+    new = config_from_dict(config_to_dict(config), overrides)
+    batch, old_updates, new_updates = config.batch_size, config.num_updates, new.num_updates
+    if new_updates <= old_updates:
+        raise ConfigError(
+            f"run.total_steps={new.run.total_steps} does not lengthen the run: it is {old_updates} updates of {batch} "
+            f"steps ({old_updates * batch} steps) long; give at least {(old_updates + 1) * batch} to add an update"
+        )
+    record = {
+        "time": now(),
+        "update": update,
+        "step": update * batch,
+        "total_steps": [config.run.total_steps, new.run.total_steps],
+        "num_updates": [old_updates, new_updates],
+        "command": sys.argv,
+    }
+    # config.yaml first: from then on a resume sees the longer run (its checkpoints hold the shorter one), and the
+    # schedules follow from that difference; the run_info record below is the history for readers
+    atomic_write_text(run_dir / "config.yaml", dump_config(new))
+    info_path = run_dir / "run_info.json"
+    info = json.loads(info_path.read_text()) if info_path.is_file() else run_info(config)
+    info.pop("finished", None)
+    info["num_updates"] = new_updates
+    info.setdefault("extended", []).append(record)
+    write_json_atomic(info_path, info, sort_keys=False)
+    return new, record
+
+
 class TrainingLog:
     """``training.csv``, one row appended and flushed per update, so a running (or killed) run's log is current.
 

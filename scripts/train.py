@@ -1,8 +1,11 @@
 """Train one config: ``python scripts/train.py --config FILE [--set key=value ...] [--run-dir DIR]``.
 
-``--resume DIR`` continues a run from its newest checkpoint with the config saved in DIR. The run directory
-(default ``runs/<config name>/<timestamp>-seed<seed>``) receives the resolved config, run_info.json (seed, versions,
-git revision), TensorBoard events and checkpoints.
+``--resume DIR`` continues a run from its newest checkpoint with the config saved in DIR; a finished run is left as
+it is (exit 0). ``--resume DIR --set run.total_steps=N`` lengthens a run, finished or not, to N steps (the only key
+a resume may change); the schedules that decay over the whole run go on from their current values to their final
+values at the new end. The run directory (default ``runs/<config name>/<timestamp>-seed<seed>``) receives the
+resolved config, run_info.json (seed, versions, git revision, resumes and extensions), training.csv, TensorBoard
+events and checkpoints.
 """
 
 from __future__ import annotations
@@ -10,9 +13,11 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
+from agents.checkpoint import checkpoint_update, latest_checkpoint, run_config  # noqa: E402
 from agents.config import ConfigError, load_config, rounding_notice  # noqa: E402
 from agents.trainer import Trainer, TrainingDiverged, default_run_dir  # noqa: E402
 
@@ -20,17 +25,26 @@ from agents.trainer import Trainer, TrainingDiverged, default_run_dir  # noqa: E
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--config", help="YAML config file")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (repeatable)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override (repeatable); with --resume only run.total_steps=N, to lengthen the run",
+    )
     parser.add_argument("--run-dir", help="run directory (default: runs/<config name>/<timestamp>-seed<seed>)")
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its newest checkpoint")
     args = parser.parse_args(argv)
-    if args.resume and (args.config or args.set or args.run_dir):
-        parser.error("--resume DIR takes the config saved in DIR; it cannot be combined with --config/--set/--run-dir")
+    if args.resume and (args.config or args.run_dir):
+        parser.error("--resume DIR takes the config saved in DIR; it cannot be combined with --config/--run-dir")
     if not args.resume and not args.config:
         parser.error("give --config FILE (or --resume DIR)")
     try:
         if args.resume:
-            trainer = Trainer.resume(args.resume)
+            if not args.set and (done := _finished(Path(args.resume))):
+                print(done)
+                return 0
+            trainer = Trainer.resume(args.resume, args.set)
         else:
             config = load_config(args.config, args.set)
             run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(args.config, config.run.seed)
@@ -40,8 +54,10 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    if trainer.extension is not None:
+        print(_extension_message(trainer.extension), flush=True)
     notice = rounding_notice(trainer.config)
-    if notice and not args.resume:
+    if notice and (not args.resume or trainer.extension is not None):
         print(f"note: {notice}", flush=True)
     print(f"run directory: {trainer.run_dir}", flush=True)
     try:
@@ -54,6 +70,29 @@ def main(argv: list[str] | None = None) -> int:
         summary = {k: v for k, v in last.items() if k.startswith(("charts/episodic", "env/"))}
         print("last update: " + ", ".join(f"{k}={v:.4g}" for k, v in summary.items()))
     return 0
+
+
+def _finished(run_dir: Path) -> str | None:
+    """What to say when the run in ``run_dir`` has done all its updates (None when it has not): read from the
+    config and the newest checkpoint's name, before anything is built or written."""
+    config, latest = run_config(run_dir), latest_checkpoint(run_dir)
+    if latest is None or checkpoint_update(latest) < config.num_updates:
+        return None
+    steps, total = checkpoint_update(latest) * config.batch_size, config.num_updates * config.batch_size
+    return (
+        f"{run_dir}: already finished ({steps} steps of {total}); nothing changed. "
+        f"To train it further: --resume {run_dir} --set run.total_steps=N (N >= {total + config.batch_size})"
+    )
+
+
+def _extension_message(record: dict[str, Any]) -> str:
+    (old_steps, new_steps), (old_updates, new_updates) = record["total_steps"], record["num_updates"]
+    return (
+        f"lengthening the run from run.total_steps={old_steps} ({old_updates} updates) to {new_steps} "
+        f"({new_updates} updates), from update {record['update']} (step {record['step']}) on: the schedules that "
+        f"decay over the whole run go on from their values there to their final values at update {new_updates} "
+        "(recorded in run_info.json, 'extended')"
+    )
 
 
 if __name__ == "__main__":

@@ -242,6 +242,22 @@ def test_linear_schedule() -> None:
     assert Schedule(0.3).value(7, 10) == 0.3
 
 
+def test_an_extended_schedule_goes_on_from_where_it_was() -> None:
+    """Lengthening a run (``extensions``: at update, previous length) makes a whole-run decay go on linearly from
+    its current value to ``final`` at the new end: no jump, a finished run's value stays final; ``decay_updates`` and
+    constants do not move; without extensions the values are the plain linear ones, bit for bit."""
+    schedule = Schedule(1.0, 0.0)
+    assert [schedule.value(u, 6, [(2, 4)]) for u in range(6)] == [1.0, 0.75, 0.5, 0.375, 0.25, 0.125]
+    twice = [schedule.value(u, 8, [(2, 4), (4, 6)]) for u in range(8)]
+    assert twice == [1.0, 0.75, 0.5, 0.375, 0.25, 0.1875, 0.125, 0.0625]
+    assert [schedule.value(u, 8, [(4, 4)]) for u in range(3, 8)] == [0.25, 0.0, 0.0, 0.0, 0.0]  # finished at 4
+    assert [schedule.value(u, 8, [(2, 4), (2, 6)]) for u in range(2, 4)] == [0.5, 0.5 - 0.5 / 6]  # extended twice at 2
+    assert Schedule(1.0, 0.5, decay_updates=4).value(3, 10, [(2, 3)]) == Schedule(1.0, 0.5, 4).value(3, 10)
+    assert Schedule(0.3).value(7, 10, [(5, 6)]) == 0.3
+    lr = Schedule(3e-4, 1e-4)
+    assert all(lr.value(u, 977) == 3e-4 + (1e-4 - 3e-4) * min(u / 977, 1.0) for u in range(980))
+
+
 def test_dump_and_reload_round_trip(tmp_path: Path) -> None:
     config = config_from_dict({}, ["ppo.sequence_length=8", "env.options.delay=6", "ppo.entropy_coef=0.01"])
     path = tmp_path / "config.yaml"

@@ -162,6 +162,57 @@ def test_training_csv_gets_a_row_per_update_while_the_run_goes_on(tmp_path: Path
     assert [row["step"] for row in _rows(path)] == [str(64 * u) for u in range(1, 7)]
 
 
+def test_an_extended_run_resumes_exactly_and_its_schedules_go_on_from_final(tmp_path: Path) -> None:
+    """A finished 3-update run lengthened to 6: killed right after the extension (its newest checkpoint still says
+    3 updates) and again after update 5, it ends as the same extension run uninterrupted: weights, training.csv,
+    learning rates. The learning rate, which had decayed to its final value at update 3, stays there."""
+    config = _config("run.total_steps=192", "run.checkpoint_interval=2", "run.keep_checkpoints=0")
+    lengthen = ["run.total_steps=384"]
+    Trainer(config, tmp_path / "a").train()
+    uninterrupted = Trainer.resume(tmp_path / "a", lengthen)
+    assert uninterrupted.extension["num_updates"] == [3, 6] and not uninterrupted.finished
+    history = uninterrupted.train()
+    assert [m["update"] for m in history] == [4, 5, 6]
+    assert [m["charts/learning_rate"] for m in history] == pytest.approx([1e-4] * 3)
+
+    Trainer(config, tmp_path / "b").train()
+    killed = Trainer.resume(tmp_path / "b", lengthen)
+    _kill_after(killed, 3)  # before its first update: the newest checkpoint is the 3-update run's
+    with pytest.raises(KeyboardInterrupt):
+        killed.train()
+    killed = Trainer.resume(tmp_path / "b")  # config.yaml says 6 updates, the checkpoint 3: extended at update 3
+    assert killed.extensions == [(3, 3)] and killed.extension is None
+    _kill_after(killed, 5)
+    with pytest.raises(KeyboardInterrupt):
+        killed.train()
+    _next_second()
+    resumed = Trainer.resume(tmp_path / "b")  # from update 4's checkpoint, which holds the extension
+    assert (resumed.update, resumed.extensions) == (4, [(3, 3)])
+    assert [m["charts/learning_rate"] for m in resumed.train()] == pytest.approx([1e-4] * 2)
+    _assert_same_weights(uninterrupted, resumed)
+    assert _rows(tmp_path / "a" / "training.csv") == _rows(tmp_path / "b" / "training.csv")
+    assert [r["step"] for r in _rows(tmp_path / "b" / "training.csv")] == [str(64 * u) for u in range(1, 7)]
+    info = json.loads((tmp_path / "b" / "run_info.json").read_text())
+    assert [e["update"] for e in info["extended"]] == [3] and info["finished"]["update"] == 6
+    # the checkpoints from before the extension still load, for evaluation and for the trainer
+    from agents.checkpoint import load_policy
+
+    assert load_policy(tmp_path / "b", tmp_path / "b" / "checkpoints" / "update_0000002.pt").update == 2
+
+
+def test_resume_names_the_keys_of_a_config_that_changed_since_the_checkpoint(tmp_path: Path) -> None:
+    Trainer(_config("run.total_steps=128"), tmp_path).train()
+    saved = yaml.safe_load((tmp_path / "config.yaml").read_text())
+    saved["ppo"]["gamma"] = 0.9
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
+    with pytest.raises(ValueError, match=r"different config than the run's config.yaml \(differing: ppo.gamma\)"):
+        Trainer.resume(tmp_path)
+    saved["ppo"]["gamma"], saved["run"]["total_steps"] = 0.99, 64  # shorter than the checkpoint's run
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump(saved))
+    with pytest.raises(ValueError, match="a run can be extended, not shortened"):
+        Trainer.resume(tmp_path)
+
+
 def test_resume_with_dict_observations_and_multidiscrete_actions(tmp_path: Path, dict_env: str) -> None:
     config = _config(
         f"env.id={dict_env}",
@@ -313,8 +364,8 @@ def test_command_line(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert "env/success=" in capsys.readouterr().out
     assert train_script.main(["--config", str(config_path), "--set", "ppo.gama=0.9"]) == 2
     assert "did you mean 'ppo.gamma'?" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        train_script.main(["--resume", str(run_dir), "--set", "ppo.gamma=0.9"])
+    assert train_script.main(["--resume", str(run_dir), "--set", "ppo.gamma=0.9"]) == 2
+    assert "ppo.gamma cannot be changed on resume" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         train_script.main(["--config", str(config_path), "--run-dir", str(run_dir)])  # would overwrite a run
     assert train_script.main(["--resume", str(tmp_path / "missing")]) == 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -64,3 +65,84 @@ def test_a_fractional_integer_override_exits_2_naming_the_key(
     assert "ppo.epochs='1.5e0' is invalid: expected an int in [1, inf]; 1.5 is not a whole number" in (
         capsys.readouterr().err
     )
+
+
+def _snapshot(run_dir: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(run_dir)): p.read_bytes() for p in sorted(run_dir.rglob("*")) if p.is_file()}
+
+
+def _trained(tmp_path: Path, config_file: Path) -> Path:
+    run_dir = tmp_path / "run"
+    assert train_script.main(["--config", str(config_file), "--run-dir", str(run_dir)]) == 0
+    return run_dir
+
+
+def test_resuming_a_finished_run_says_so_and_changes_nothing(
+    tmp_path: Path, config_file: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """No 'resumed' entry in run_info.json, no new (empty) event file, no rewritten log: the directory stays
+    byte for byte what it was, and the trainer itself does nothing either."""
+    from agents.trainer import Trainer
+
+    run_dir = _trained(tmp_path, config_file)
+    capsys.readouterr()
+    before = _snapshot(run_dir)
+    assert train_script.main(["--resume", str(run_dir)]) == 0
+    out = capsys.readouterr().out
+    assert f"{run_dir}: already finished (128 steps of 128); nothing changed" in out
+    assert f"--resume {run_dir} --set run.total_steps=N (N >= 192)" in out
+    assert _snapshot(run_dir) == before
+    trainer = Trainer.resume(run_dir)
+    assert trainer.finished and trainer.train() == []
+    assert _snapshot(run_dir) == before
+
+
+def test_extending_a_finished_run_trains_exactly_the_added_updates(
+    tmp_path: Path, config_file: Path, capsys: pytest.CaptureFixture
+) -> None:
+    run_dir = _trained(tmp_path, config_file)
+    rows_before = (run_dir / "training.csv").read_text().splitlines()
+    capsys.readouterr()
+    assert train_script.main(["--resume", str(run_dir), "--set", "run.total_steps=2.5e2"]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "lengthening the run from run.total_steps=128 (2 updates) to 250 (3 updates), from update 2 (step 128) on"
+    ) in out
+    assert "note: run.total_steps=250 is not a whole number of updates of 64 steps" in out
+    rows = (run_dir / "training.csv").read_text().splitlines()
+    assert rows[:3] == rows_before and len(rows) == 1 + 3 and rows[-1].split(",")[4] == "192"
+    assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["update_0000002.pt", "update_0000003.pt"]
+    info = json.loads((run_dir / "run_info.json").read_text())
+    (extension,) = info["extended"]
+    assert {k: extension[k] for k in ("update", "step", "total_steps", "num_updates")} == {
+        "update": 2,
+        "step": 128,
+        "total_steps": [128, 250],
+        "num_updates": [2, 3],
+    }
+    assert info["finished"]["update"] == 3 and info["num_updates"] == 3
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["run"]["total_steps"] == 250
+    assert train_script.main(["--resume", str(run_dir)]) == 0
+    assert "already finished (192 steps of 192)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("ppo.gamma=0.9", "ppo.gamma cannot be changed on resume"),
+        ("run.seed=4", "run.seed cannot be changed on resume"),
+        ("run.total_steps=128", "run.total_steps=128 does not lengthen the run: it is 2 updates of 64 steps"),
+        ("run.total_steps=190", "give at least 192 to add an update"),
+        ("run.total_steps=1.5e2", "run.total_steps=150 does not lengthen the run"),
+        ("run.total_steps=fast", "run.total_steps='fast' is invalid: expected an int"),
+    ],
+)
+def test_a_resume_refuses_any_other_change_naming_the_key(
+    tmp_path: Path, config_file: Path, capsys: pytest.CaptureFixture, override: str, message: str
+) -> None:
+    run_dir = _trained(tmp_path, config_file)
+    capsys.readouterr()
+    before = _snapshot(run_dir)
+    assert train_script.main(["--resume", str(run_dir), "--set", override]) == 2
+    assert message in capsys.readouterr().err
+    assert _snapshot(run_dir) == before
