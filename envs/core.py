@@ -27,8 +27,10 @@ Every face goes through :meth:`BatchedCore.step`, which refuses what a family mu
 state: a step of a slot that has no episode (never reset, or its last reset failed) raises
 ``gymnasium.error.ResetNeeded``, and actions outside the action space raise ``ValueError`` naming the slot, the action
 and the space. Actions are integer arrays, one row per stepped slot (``(n,)`` for ``Discrete``, ``(n, branches)``
-for ``MultiDiscrete``); floats are refused, integer-valued ones too (a float action is almost always a bug, such as
-passing probabilities; gymnasium's ``Discrete.contains`` refuses floats as well): cast with ``astype(int)``.
+for ``MultiDiscrete``; ``Discrete`` also takes ``(n, 1)``, the one-element rows that clients written for memory-gym
+send, as they treat every action space as multi-discrete); floats are refused, integer-valued ones too (a float action
+is almost always a bug, such as passing probabilities; gymnasium's ``Discrete.contains`` refuses floats as well):
+cast with ``astype(int)``.
 """
 
 from __future__ import annotations
@@ -170,9 +172,10 @@ class BatchedCore:
         if bounds is None:
             bounds = self._action_bounds = _action_bounds(self.single_action_space, self.num_envs)
         batch_shape, row_shape, high, top = bounds
-        if actions.shape != (batch_shape if isinstance(idx, slice) else (len(idx), *row_shape)) or (
-            actions.dtype.kind not in "iu"
-        ):
+        shape = batch_shape if isinstance(idx, slice) else (len(idx), *row_shape)
+        if actions.shape != shape and not row_shape and actions.shape == (*shape, 1):
+            actions = actions.reshape(shape)  # Discrete actions as one-element rows (memory-gym's clients send them)
+        if actions.shape != shape or actions.dtype.kind not in "iu":
             raise ValueError(_action_error(actions, self.slots(idx), self.single_action_space))
         if actions.size > _FEW_ACTIONS or top is None:
             valid = not np.count_nonzero(actions.view(_UNSIGNED[actions.itemsize]) >= high)
@@ -302,15 +305,18 @@ def _action_error(actions: np.ndarray, slots: np.ndarray, space: gym.Space) -> s
     """Why ``actions`` (one row per slot of ``slots``) are refused: the first offending slot, its action, the space."""
     valid = _describe_space(space)
     row_shape = space.shape
+    # Discrete rows may also be one-element arrays (see ``check_actions``)
+    rows = f"{row_shape} or (1,)" if not row_shape else f"{row_shape}"
     if actions.shape[:1] != (len(slots),):
+        batch = f"{(len(slots),)} or {(len(slots), 1)}" if not row_shape else f"{(len(slots), *row_shape)}"
         return (
             f"got actions of shape {actions.shape} for {len(slots)} slots: expected one action per slot, an array of "
-            f"shape {(len(slots), *row_shape)}; each action in {valid}"
+            f"shape {batch}; each action in {valid}"
         )
     for k, action in zip(slots.tolist(), actions, strict=True):
         value = action.tolist()
         if action.shape != row_shape:
-            return f"slot {k}: action {value!r} has shape {action.shape}, expected {row_shape}: an action in {valid}"
+            return f"slot {k}: action {value!r} has shape {action.shape}, expected {rows}: an action in {valid}"
         if actions.dtype.kind not in "iu":
             cast = " (integer-valued floats too: cast with astype(int))" if actions.dtype.kind == "f" else ""
             return f"slot {k}: action {value!r} has dtype {actions.dtype}; actions are integers{cast}, in {valid}"

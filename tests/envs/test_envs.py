@@ -276,7 +276,10 @@ def bad_actions(space: gym.Space) -> list[tuple[Any, str]]:
             (space.n, rf"action {space.n} is outside the action space Discrete\({space.n}\)"),
             (-1, r"action -1 is outside"),
             (1.0, r"action 1.0 has dtype float64; actions are integers \(integer-valued floats too"),
-            ([1], r"action \[1\] has shape \(1,\), expected \(\)"),
+            ([1.0], r"action 1.0 has dtype float64; actions are integers"),
+            (np.array([space.n]), rf"action {space.n} is outside the action space Discrete\({space.n}\)"),
+            ([1, 2], r"action \[1, 2\] has shape \(2,\), expected \(\) or \(1,\)"),
+            ([[1]], r"action \[\[1\]\] has shape \(1, 1\), expected \(\) or \(1,\)"),
             (True, r"action True has dtype bool"),
         ]
     high = int(space.nvec[0])
@@ -286,6 +289,7 @@ def bad_actions(space: gym.Space) -> list[tuple[Any, str]]:
         ([0, -1], r"action \[0, -1\] is outside"),
         ([1, 1, 1], r"action \[1, 1, 1\] has shape \(3,\), expected \(2,\)"),
         (np.array([0.0, 1.0]), r"action \[0.0, 1.0\] has dtype float64"),
+        ([[0, 1]], r"action \[\[0, 1\]\] has shape \(1, 2\), expected \(2,\)"),
     ]
 
 
@@ -490,3 +494,38 @@ def test_vector_face_assembles_step_infos_without_a_per_slot_call(env_id: str, m
         _, _, _, _, infos = venv.step(actions)
         assert infos["ground_truth"].shape[0] == 4 and infos["_ground_truth"].all()
     venv.reset(seed=1)
+
+
+DISCRETE_IDS = [env_id for env_id in ALL_IDS if isinstance(make_core(env_id).single_action_space, gym.spaces.Discrete)]
+
+
+@pytest.mark.parametrize("env_id", DISCRETE_IDS)
+def test_discrete_actions_take_memory_gym_spellings(env_id: str) -> None:
+    """Clients written for memory-gym treat every action space as multi-discrete: ``3``, ``[3]``, ``np.array([3])``
+    and ``np.array(3)`` are the same action on the single face, shapes (N,) and (N, 1) on the vector face."""
+    spellings = [int, lambda a: [a], lambda a: np.array([a]), np.array, np.int64]
+    faces = [gym.make(env_id) for _ in spellings]
+    for env in faces:
+        env.reset(seed=4)
+    rng = np.random.default_rng(0)
+    for t in range(120):
+        action = int(rng.integers(faces[0].action_space.n))
+        results = [env.step(spell(action)) for env, spell in zip(faces, spellings, strict=True)]
+        for got in results[1:]:
+            assert_step((got[0], *got[1:3], got[4]), (results[0][0], *results[0][1:3], results[0][4]), f"step {t}")
+        if results[0][2]:
+            for env in faces:
+                env.reset()
+    for mode in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+        flat, column = (gym.make_vec(env_id, num_envs=4, autoreset_mode=mode) for _ in range(2))
+        flat.reset(seed=9)
+        column.reset(seed=9)
+        for t in range(150):  # through autoresets (the restarting slots' actions are checked too)
+            actions = rng.integers(flat.single_action_space.n, size=4)
+            got, want = column.step(actions[:, None]), flat.step(actions)
+            np.testing.assert_array_equal(image_of(got[0]), image_of(want[0]))
+            assert got[1].tolist() == want[1].tolist() and got[2].tolist() == want[2].tolist(), f"step {t}"
+        with pytest.raises(ValueError, match=r"slot 0: action \[0, 0\] has shape \(2,\), expected \(\) or \(1,\)"):
+            flat.step(np.zeros((4, 2), dtype=np.int64))
+        with pytest.raises(ValueError, match=r"slot 2: action 9 is outside the action space"):
+            flat.step(np.array([[0], [1], [9], [0]]))
