@@ -46,7 +46,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from envs.options import Option, resolve_options
+from envs.options import Option, check_mapping, resolve_options
 from envs.rng import seeded_generator, seeded_generators
 
 __all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_core", "seeded_generator"]
@@ -314,7 +314,10 @@ def _action_error(actions: np.ndarray, slots: np.ndarray, space: gym.Space) -> s
             f"shape {batch}; each action in {valid}"
         )
     for k, action in zip(slots.tolist(), actions, strict=True):
+        action = np.asarray(action)  # rows of an object array are the objects themselves (None, ...)
         value = action.tolist()
+        if actions.dtype.kind not in "iufb":  # None, strings, ragged objects: not an action at all
+            return f"slot {k}: action {value!r} is not an action: expected an action in {valid}"
         if action.shape != row_shape:
             return f"slot {k}: action {value!r} has shape {action.shape}, expected {rows}: an action in {valid}"
         if actions.dtype.kind not in "iu":
@@ -475,6 +478,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict]:
+        check_mapping(options, self.core.option_specs, self.core.env_name, extra=("reset_mask",))
         super().reset(seed=seed if isinstance(seed, int) else None)
         options = dict(options or {})
         mask = np.asarray(options.pop("reset_mask", np.ones(self.num_envs, dtype=bool)), dtype=bool)

@@ -89,6 +89,7 @@ def resolve_options(
     name: str = "",
 ) -> dict[str, Any]:
     """Merge ``options`` over ``base`` (or the spec defaults) after validating every key and value."""
+    check_mapping(options, specs, name)
     merged = (
         {k: _copy(spec.default) for k, spec in specs.items()}
         if base is None
@@ -102,6 +103,19 @@ def resolve_options(
             raise ValueError(f"unknown option {key!r}{where}{hint}; valid options: {', '.join(sorted(specs))}")
         merged[key] = specs[key].validate(key, value)
     return merged
+
+
+def check_mapping(options: Any, specs: Mapping[str, Any], name: str = "", extra: tuple[str, ...] = ()) -> None:
+    """``ValueError`` unless ``options`` is ``None`` or a mapping (``reset(options=[1, 2])`` would otherwise fail
+    later with an AttributeError that names neither the argument nor what it should be)."""
+    if options is None or isinstance(options, Mapping):
+        return
+    where = f" for {name}" if name else ""
+    valid = ", ".join([*sorted(specs), *extra]) or "none"
+    raise ValueError(
+        f"options={options!r} is invalid{where}: expected None or a mapping (a dict) of option names to values; "
+        f"valid options: {valid}"
+    )
 
 
 def _copy(value: Any) -> Any:

@@ -281,6 +281,7 @@ def bad_actions(space: gym.Space) -> list[tuple[Any, str]]:
             ([1, 2], r"action \[1, 2\] has shape \(2,\), expected \(\) or \(1,\)"),
             ([[1]], r"action \[\[1\]\] has shape \(1, 1\), expected \(\) or \(1,\)"),
             (True, r"action True has dtype bool"),
+            (None, rf"action None is not an action: expected an action in Discrete\({space.n}\)"),
         ]
     high = int(space.nvec[0])
     return [
@@ -290,6 +291,7 @@ def bad_actions(space: gym.Space) -> list[tuple[Any, str]]:
         ([1, 1, 1], r"action \[1, 1, 1\] has shape \(3,\), expected \(2,\)"),
         (np.array([0.0, 1.0]), r"action \[0.0, 1.0\] has dtype float64"),
         ([[0, 1]], r"action \[\[0, 1\]\] has shape \(1, 2\), expected \(2,\)"),
+        (None, r"action None is not an action: expected an action in MultiDiscrete\(\[3, 3\]\)"),
     ]
 
 
@@ -529,3 +531,31 @@ def test_discrete_actions_take_memory_gym_spellings(env_id: str) -> None:
             flat.step(np.zeros((4, 2), dtype=np.int64))
         with pytest.raises(ValueError, match=r"slot 2: action 9 is outside the action space"):
             flat.step(np.array([[0], [1], [9], [0]]))
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_options_that_are_not_a_mapping_and_a_missing_action_are_named(env_id: str) -> None:
+    env = gym.make(env_id)
+    obs, _ = env.reset(seed=2)
+    for options in ([1, 2], "command_count", 3):
+        with pytest.raises(
+            ValueError, match=rf"options={re.escape(repr(options))} is invalid.*expected None or a mapping"
+        ):
+            env.reset(seed=3, options=options)
+    assert np.array_equal(image_of(env.unwrapped.core.observations())[0], image_of(obs)), "the level was left alone"
+    with pytest.raises(gym.error.ResetNeeded):  # as after any refused reset
+        env.step(random_action(env.action_space, np.random.default_rng(0)))
+    env.reset(seed=3)
+    with pytest.raises(ValueError, match=r"slot 0: action None is not an action: expected an action in"):
+        env.step(None)
+    env.step(random_action(env.action_space, np.random.default_rng(0)))  # the episode goes on
+    with pytest.raises(ValueError, match=r"options=\[1\] is invalid.*valid options: "):
+        gym.make(env_id, options=[1])
+    venv = gym.make_vec(env_id, num_envs=2)
+    with pytest.raises(ValueError, match=r"options=\[1, 2\] is invalid.*valid options: .*reset_mask"):
+        venv.reset(seed=0, options=[1, 2])
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"got actions of shape \(\) for 2 slots"):
+        venv.step(None)
+    with pytest.raises(ValueError, match=r"slot 0: action None is not an action"):
+        venv.step([None, None])
