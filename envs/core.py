@@ -21,6 +21,8 @@ What a family implements (``idx`` is ``slice(None)`` for all slots or an int arr
 * ``_final_info(k)``: the family's episode statistics (``reward`` and ``length`` are added here), or
   ``_final_infos(slots)`` for several finished slots at once (by default a loop over ``_final_info``); keys that the
   reference does not report are listed in ``added_info_keys``;
+* ``_max_episode_steps(opts)``: the reference's ``max_episode_steps`` for those options (-1, the default here, means
+  no limit is known, as the reference reports for its endless envs);
 * optionally ``_step_info(k)`` (endless envs: ``ground_truth``), ``_debug_frame(k)`` and ``render_fps(k)``.
 
 Every face goes through :meth:`BatchedCore.step`, which refuses what a family must never see, before it changes any
@@ -82,6 +84,8 @@ class BatchedCore:
         self.rngs: list[np.random.Generator | None] = [None] * self.num_envs
         self.seeds: list[int | None] = [None] * self.num_envs
         self.slot_options: list[dict[str, Any]] = [dict(self.base_options) for _ in range(self.num_envs)]
+        # memory-gym's ``max_episode_steps`` of each slot's current episode (0 until the slot's first reset)
+        self.max_episode_steps = np.zeros(self.num_envs, dtype=np.int64)
         self.episode_return = np.zeros(self.num_envs, dtype=np.float64)
         self.episode_length = np.zeros(self.num_envs, dtype=np.int64)
         self.unready: set[int] = set(range(self.num_envs))  # slots without an episode: never reset, or reset failed
@@ -131,6 +135,7 @@ class BatchedCore:
         if slots:
             self.episode_return[slots] = 0.0
             self.episode_length[slots] = 0
+            self.max_episode_steps[slots] = self._max_episode_steps(opts)
             self._reset_slots(slots, rngs, opts)
             self.unready.difference_update(slots)
 
@@ -242,6 +247,10 @@ class BatchedCore:
     def _step(self, idx: Index, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
 
+    def _max_episode_steps(self, opts: dict[str, Any]) -> int:
+        # What memory-gym 1.0.2 stores in ``max_episode_steps`` at a reset with these options; -1: no known limit.
+        return -1
+
     def _observation(self, idx: Index) -> np.ndarray | dict[str, np.ndarray]:
         raise NotImplementedError
 
@@ -277,6 +286,13 @@ def _action_bounds(space: gym.Space, num_envs: int) -> tuple[tuple[int, ...], tu
             return (num_envs, *space.shape), space.shape, np.array(nvec.flat[0]), int(nvec.flat[0])
         return (num_envs, *space.shape), space.shape, nvec, None
     raise NotImplementedError(f"action checks cover Discrete and MultiDiscrete spaces starting at 0, not {space}")
+
+
+def _no_limit_before_reset(env_name: str) -> AttributeError:
+    return AttributeError(
+        f"{env_name} has no max_episode_steps before its first reset (the reset's options set it, as in memory-gym): "
+        "call reset first"
+    )
 
 
 def _as_array(actions: Any, space: gym.Space) -> np.ndarray:
@@ -391,11 +407,21 @@ class MemoryGymEnv(gym.Env):
         self.has_ground_truth_info = self.core.has_ground_truth_info
         self.ground_truth_space = self.core.ground_truth_space
         self._window: HumanWindow | None = None
+        self._was_reset = False
+
+    @property
+    def max_episode_steps(self) -> int:
+        """memory-gym's bound on the length of the current episode, set by every reset from its options (-1: no
+        bound, the endless ids' default). Like memory-gym's, the attribute does not exist before the first reset."""
+        if not self._was_reset:
+            raise _no_limit_before_reset(self.core.env_name)
+        return int(self.core.max_episode_steps[0])
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
         # Not ``super().reset(seed)``: that would seed a second generator (as costly as the level) only to replace
         # it. env.np_random is the generator that builds the levels; np_random_seed follows gymnasium's rules.
         self.core.reset_slot(0, seed, options)
+        self._was_reset = True
         self._np_random = self.core.rngs[0]
         if seed is not None:
             self._np_random_seed = int(seed)
@@ -442,6 +468,8 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
     ``reset(seed=s)`` seeds slot k with ``s + k`` (a list gives one seed per slot), so slot k reproduces the
     episode of a single env reset with that seed. Autoreset episodes continue each slot's generator, like
     ``reset(seed=None)`` on a single env. ``options={"reset_mask": mask, ...}`` resets only the masked slots.
+
+    ``max_episode_steps`` is memory-gym's per-episode bound of every slot (an array, updated at each slot's reset).
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 25, "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -474,6 +502,16 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
             "autoreset_mode": self.autoreset_mode,
         }
         self._needs_reset = np.zeros(self.num_envs, dtype=bool)
+        self._was_reset = False
+
+    @property
+    def max_episode_steps(self) -> np.ndarray:
+        """memory-gym's ``max_episode_steps`` of each slot's current episode (int64, one entry per slot, updated at
+        every reset and autoreset of the slot; 0 for a slot that a masked reset never reached). Like the single
+        face's attribute, it does not exist before the first reset."""
+        if not self._was_reset:
+            raise _no_limit_before_reset(self.core.env_name)
+        return self.core.max_episode_steps.copy()
 
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
@@ -487,6 +525,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         seeds = self._slot_seeds(seed)
         slots = np.flatnonzero(mask)
         self.core.reset_slots(slots, [seeds[k] for k in slots], options)
+        self._was_reset = True
         self._needs_reset[mask] = False
         infos: dict[str, Any] = {}
         if slots.size:

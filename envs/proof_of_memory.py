@@ -70,6 +70,9 @@ class ProofOfMemoryCore(BatchedCore):
         frames[t >= self.delay[idx], half - 3 : half + 3, :] = 255
         self.frames[idx] = frames
 
+    def _max_episode_steps(self, opts: dict[str, Any]) -> int:
+        return opts["delay"] + 1  # every episode ends on the step after the query frame appears
+
     def _observation(self, idx: Index) -> np.ndarray:
         return self.frames[idx]
 

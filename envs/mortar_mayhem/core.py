@@ -451,6 +451,16 @@ class MortarMayhemCore(BatchedCore):
         return frame
 
     # ------------------------------------------------------------------------------------------ observation
+    def _max_episode_steps(self, opts: dict[str, Any]) -> int:
+        # memory-gym's bound, from the largest value of every list option: clue stream C = n (shown + delay), then
+        # n checks D + E apart, + 1 (one step above the longest episode of the clue variants, kept: clients size their
+        # memory from it). The B variants have no clue stream; the endless one reports ``max_steps`` (-1: none).
+        if self.endless:
+            return int(opts["max_steps"])
+        n, act, lethal = max(opts["command_count"]), max(opts["explosion_delay"]), max(opts["explosion_duration"])
+        clue = n * (max(opts["command_show_duration"]) + max(opts["command_show_delay"])) if self.clue_phase else 0
+        return clue + n * (act + lethal) - lethal + 1
+
     def _observation(self, idx: Index) -> np.ndarray | dict[str, np.ndarray]:
         if self.vector_observation:
             return {"visual_observation": self.frames[idx], "vector_observation": self.vector[idx]}

@@ -810,6 +810,9 @@ class MysteryPathCore(BatchedCore):
         target[frame_slots, bands, 1 : TILE - 1] = middle[:, None, visible]
 
     # ------------------------------------------------------------------------------------------ outputs
+    def _max_episode_steps(self, opts: dict[str, Any]) -> int:
+        return int(opts["max_steps"])  # memory-gym reports the option as it is (<= 0: no cap)
+
     def _observation(self, idx: Index) -> np.ndarray:
         return self.canvas.view[idx]
 

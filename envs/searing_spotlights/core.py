@@ -873,6 +873,9 @@ class SearingSpotlightsCore(BatchedCore):
             self.stale[redraw] = False
         return self.frames
 
+    def _max_episode_steps(self, opts: dict[str, Any]) -> int:
+        return int(opts["max_steps"])  # memory-gym reports the option as it is (<= 0: no cap)
+
     def _observation(self, idx: Index) -> np.ndarray:
         return self._current_frames(idx)[idx].reshape(-1, SCREEN, SCREEN, 3)
 

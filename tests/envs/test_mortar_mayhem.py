@@ -168,6 +168,29 @@ def test_custom_timing_options(env_id: str) -> None:
     assert [s["t"] for s in steps if s["reward"] != 0] == [t0 + 5 + 8 * k for k in range(4)]
 
 
+@pytest.mark.parametrize("env_id", FINITE)
+@pytest.mark.parametrize("custom", [False, True])
+def test_max_episode_steps_bounds_the_perfect_episode(env_id: str, custom: bool) -> None:
+    """memory-gym's ``max_episode_steps`` (C + n(D + E) - E + 1) is the length of a perfect episode, one step more
+    with a clue stream (reset shows its first frame); list options count with their largest value."""
+    env, core = make(env_id)
+    options = {"command_count": [3], "explosion_delay": [5], "explosion_duration": [3]} if custom else {}
+    if custom and env_id in (MM, MM_GRID):
+        options |= {"command_show_duration": [2], "command_show_delay": [0]}
+    steps = play(env, core, 4, options)
+    assert steps[-1]["info"]["success"] == 1
+    longest = TIMELINE[env_id][3] if not custom else (6 if env_id in (MM, MM_GRID) else 1) + 5 + 8 * 2
+    assert len(steps) - 1 == longest
+    assert env.unwrapped.max_episode_steps == longest + (1 if env_id in (MM, MM_GRID) else 0)
+    if custom:  # several values: the figure bounds the episodes of the largest ones
+        smaller = {"command_count": 1, "explosion_delay": 2, "explosion_duration": 1, "command_show_duration": 1}
+        lists = {key: [smaller.get(key, 0), *value] for key, value in options.items()}
+        lengths = [len(play(env, core, seed, lists)) - 1 for seed in range(6)]
+        assert env.unwrapped.max_episode_steps == longest + (1 if env_id in (MM, MM_GRID) else 0)
+        assert max(lengths) <= longest and min(lengths) < longest
+    env.close()
+
+
 # --------------------------------------------------------------------------------------- rewards and quirks
 @pytest.mark.parametrize("env_id", FINITE)
 def test_failed_last_check_counts_as_success(env_id: str) -> None:
