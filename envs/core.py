@@ -79,11 +79,14 @@ class BatchedCore:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise ValueError(f"num_envs={num_envs!r} is invalid: expected an int >= 1")
         self.num_envs = int(num_envs)
-        # Options given at construction become this instance's defaults; reset options apply to one episode.
+        # Options given at construction become this instance's defaults; reset options apply to the episodes that
+        # reset starts (and, through ``restart_slots``, to the slots' later episodes).
         self.base_options = resolve_options(self.option_specs, options, name=self.env_name)
         self.rngs: list[np.random.Generator | None] = [None] * self.num_envs
         self.seeds: list[int | None] = [None] * self.num_envs
-        self.slot_options: list[dict[str, Any]] = [dict(self.base_options) for _ in range(self.num_envs)]
+        # The options of each slot's current episode: one shared (read-only) dict per reset call, so that
+        # ``restart_slots`` can group the slots by identity.
+        self.slot_options: list[dict[str, Any]] = [self.base_options] * self.num_envs
         # memory-gym's ``max_episode_steps`` of each slot's current episode (0 until the slot's first reset)
         self.max_episode_steps = np.zeros(self.num_envs, dtype=np.int64)
         self.episode_return = np.zeros(self.num_envs, dtype=np.float64)
@@ -110,10 +113,7 @@ class BatchedCore:
         ``None``) per slot. The result equals :meth:`reset_slot` on each slot in turn, but a family may build the
         levels together (its ``_reset_slots`` hook), which saves the per-slot overhead when many episodes end at once.
         """
-        if isinstance(slots, np.ndarray):
-            slots = slots.astype(np.int64, copy=False).tolist()
-        else:
-            slots = [int(k) for k in slots]
+        slots = _slot_list(slots)
         self.unready.update(slots)  # until the new episodes are built: a failed reset leaves no episode to step
         opts = self.resolve(options)  # validate before touching any other state
         seeds = [None] * len(slots) if seeds is None else list(seeds)
@@ -122,6 +122,22 @@ class BatchedCore:
         for seed in seeds:
             if seed is not None and (not isinstance(seed, _SEED_TYPES) or seed < 0):
                 raise ValueError(f"seed={seed!r} is invalid: expected a non-negative int or None")
+        self._start_episodes(slots, seeds, opts)
+
+    def restart_slots(self, slots: Sequence[int] | np.ndarray) -> None:
+        """New episodes in ``slots``, each with the options of its current episode (those of the slot's last reset
+        call), continuing each slot's generator: the autoreset of the vector face."""
+        slots = _slot_list(slots)
+        groups: dict[int, tuple[dict[str, Any], list[int]]] = {}
+        for k in slots:
+            opts = self.slot_options[k]
+            groups.setdefault(id(opts), (opts, []))[1].append(k)
+        for opts, group in groups.values():
+            self.unready.update(group)
+            self._start_episodes(group, [None] * len(group), opts)
+
+    def _start_episodes(self, slots: list[int], seeds: list[int | None], opts: dict[str, Any]) -> None:
+        """Build the episodes of ``slots`` with resolved ``opts`` (seeds already validated)."""
         seeded = iter(seeded_generators([seed for seed in seeds if seed is not None]))
         rngs = []
         for k, seed in zip(slots, seeds, strict=True):
@@ -293,6 +309,12 @@ def _no_limit_before_reset(env_name: str) -> AttributeError:
         f"{env_name} has no max_episode_steps before its first reset (the reset's options set it, as in memory-gym): "
         "call reset first"
     )
+
+
+def _slot_list(slots: Sequence[int] | np.ndarray) -> list[int]:
+    if isinstance(slots, np.ndarray):
+        return slots.astype(np.int64, copy=False).tolist()
+    return [int(k) for k in slots]
 
 
 def _as_array(actions: Any, space: gym.Space) -> np.ndarray:
@@ -469,6 +491,9 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
     episode of a single env reset with that seed. Autoreset episodes continue each slot's generator, like
     ``reset(seed=None)`` on a single env. ``options={"reset_mask": mask, ...}`` resets only the masked slots.
 
+    The options of a reset call apply to every episode of the slots it resets, autoresets included, until their next
+    reset call; a reset without options goes back to the options given to ``make_vec`` (the defaults). (The single
+    face applies reset options to one episode, as memory-gym does: its autoresets are the client's resets.)
     ``max_episode_steps`` is memory-gym's per-episode bound of every slot (an array, updated at each slot's reset).
     """
 
@@ -556,7 +581,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
                 rewards[live], terminated[live] = r, t
             else:
                 finals = {}
-            self.core.reset_slots(restart)  # one call for all of them (their generators continue)
+            self.core.restart_slots(restart)  # with the options of their last reset; their generators continue
         else:
             rewards, terminated, finals = self.core.step(actions)
             rewards = np.asarray(rewards, dtype=np.float64)
@@ -616,7 +641,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
                 final_info = {key: values[k] for key, values in before.items()}
                 final_info.update(finals[k])
                 entries[k] = {"final_obs": final_obs, "final_info": final_info}
-            self.core.reset_slots(done)
+            self.core.restart_slots(done)
         if done and done[0] == 0:  # slot 0's entries come first, as slot by slot
             self._add_info(infos, entries.pop(0), 0)
         self._add_step_infos(infos)

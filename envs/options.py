@@ -1,4 +1,5 @@
-"""Reset options: declared once per family, validated on every reset, applied to one episode only.
+"""Reset options: declared once per family, validated on every reset, applied to the episodes that reset starts
+(one episode on the single face; the vector face keeps them for its slots' autoresets).
 
 Each family lists its options as :class:`Option` specs (the reference's names and defaults). Unknown keys and values
 of the wrong type or outside the valid range raise ``ValueError`` naming the key and what would have been valid.

@@ -419,7 +419,7 @@ class SlotBySlotVectorEnv(envs.MemoryGymVectorEnv):
             if live.size:
                 r, t, finals = self.core.step(actions[live], idx=live)
                 rewards[live], terminated[live] = r, t
-            self.core.reset_slots(restart)
+            self.core.restart_slots(restart)
         else:
             rewards, terminated, finals = self.core.step(actions)
         final_obs = self.core.observations() if self.autoreset_mode == AutoresetMode.SAME_STEP else None
@@ -429,7 +429,7 @@ class SlotBySlotVectorEnv(envs.MemoryGymVectorEnv):
             if final_obs is not None and terminated[k]:
                 obs_k = {key: v[k] for key, v in final_obs.items()} if isinstance(final_obs, dict) else final_obs[k]
                 infos = self._add_info(infos, {"final_obs": obs_k, "final_info": info}, k)
-                self.core.reset_slot(k)
+                self.core.restart_slots([k])
                 info = self.core.step_info(k)
             if info:
                 infos = self._add_info(infos, info, k)
@@ -559,3 +559,59 @@ def test_options_that_are_not_a_mapping_and_a_missing_action_are_named(env_id: s
         venv.step(None)
     with pytest.raises(ValueError, match=r"slot 0: action None is not an action"):
         venv.step([None, None])
+
+
+MMG = "MortarMayhem-Grid-v0"
+
+
+def vector_command_counts(venv: gym.vector.VectorEnv, episodes: int, seed: int = 0) -> list[int]:
+    """``command_count`` of every episode that ends until each slot has finished ``episodes`` (random play)."""
+    rng = np.random.default_rng(seed)
+    counts: list[int] = []
+    ended = np.zeros(venv.num_envs, dtype=int)
+    while (ended < episodes).any():
+        _, _, terminated, _, infos = venv.step(rng.integers(4, size=venv.num_envs))
+        if terminated.any():
+            final = infos.get("final_info", infos)  # SAME_STEP nests the final infos
+            counts += final["command_count"][terminated].tolist()
+        ended += terminated
+    return counts
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_vector_reset_options_persist_through_autoresets(mode: AutoresetMode) -> None:
+    """The options of a vector reset apply to every later episode of the slots it reset (autoresets included) until
+    their next reset; a reset without options goes back to make_vec's options."""
+    venv = gym.make_vec(MMG, num_envs=4, autoreset_mode=mode)
+    venv.reset(seed=0, options={"command_count": [3]})
+    counts = vector_command_counts(venv, 3)
+    assert len(counts) >= 12 and set(counts) == {3}, counts
+    limit = {n: n * (3 + 1) + n * (6 + 2) - 2 + 1 for n in (2, 3)}  # C + n(D + E) - E + 1, C = n (shown + blank)
+    assert venv.max_episode_steps.tolist() == [limit[3]] * 4
+    venv.reset(seed=1)
+    assert set(vector_command_counts(venv, 2)) == {10}
+    # make_vec's options are the defaults that a reset without options goes back to
+    venv = gym.make_vec(MMG, num_envs=4, autoreset_mode=mode, options={"command_count": [4]})
+    venv.reset(seed=2)
+    assert set(vector_command_counts(venv, 2)) == {4}
+    venv.reset(seed=3, options={"command_count": [3]})
+    assert set(vector_command_counts(venv, 2)) == {3}
+    venv.reset(seed=4, options={"command_count": [2], "reset_mask": np.array([True, True, False, False])})
+    counts = vector_command_counts(venv, 2)  # slots 2 and 3 keep the options of their last reset
+    assert set(counts) == {2, 3} and counts.count(2) >= 4 and counts.count(3) >= 4
+    assert venv.max_episode_steps.tolist() == [limit[2]] * 2 + [limit[3]] * 2
+    venv.reset(seed=5)
+    assert set(vector_command_counts(venv, 2)) == {4}
+
+
+def test_single_face_options_apply_to_one_episode_as_in_memory_gym() -> None:
+    env = gym.make(MMG)
+    env.reset(seed=0, options={"command_count": [3]})
+    counts = []
+    rng = np.random.default_rng(0)
+    while len(counts) < 3:
+        _, _, terminated, _, info = env.step(int(rng.integers(4)))
+        if terminated:
+            counts.append(info["command_count"])
+            env.reset()
+    assert counts == [3, 10, 10]
