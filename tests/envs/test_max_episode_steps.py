@@ -7,6 +7,8 @@ wrong default or formula in the cores cannot agree with itself.
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -144,3 +146,14 @@ def test_time_limited_episodes_last_exactly_max_episode_steps(env_id: str, optio
     for seed in (0, 1):
         length = run_to_the_end(env, seed, options, action)
         assert length == env.unwrapped.max_episode_steps == expected(env_id, options)
+
+
+def test_the_readme_example_gives_the_figures_it_names() -> None:
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme[readme.index("## Environments") :]
+    block = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    named = int(re.search(r"^env\.unwrapped\.max_episode_steps  # (\d+):", block, re.M).group(1))
+    scope: dict[str, Any] = {}
+    exec(block, scope)  # the README's own example
+    assert scope["env"].unwrapped.max_episode_steps == named == expected("MortarMayhem-Grid-v0", {"command_count": [5]})
+    assert scope["vec"].max_episode_steps.tolist() == [named] * scope["vec"].num_envs
