@@ -121,6 +121,7 @@ def launch_slurm(panel: Panel, *, cluster: str | None = None, echo: Echo = print
         json.dumps({"time": now(), "run": run.name, "job": str(job.job_id), "run_dir": str(run.run_dir)})
         for run, job in submitted
     ]
+    panel.slurm_dir.mkdir(parents=True, exist_ok=True)  # submitit's debug executor makes no folder
     with open(panel.slurm_dir / "submissions.jsonl", "a") as handle:  # which job trained which run (sacct)
         handle.write("".join(line + "\n" for line in lines))
     for (run, job), status in zip(submitted, pending, strict=True):

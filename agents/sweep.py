@@ -115,7 +115,8 @@ class SweepRun:
 
 @dataclass(frozen=True)
 class Panel:
-    """The runs of one grid config under ``root/name``, with the cluster settings of its ``grid.slurm``."""
+    """The runs of one grid config under ``root/name``, with the cluster settings of its ``grid.slurm``; after
+    :func:`select_runs`, only the selected runs."""
 
     name: str
     root: Path
@@ -124,6 +125,7 @@ class Panel:
     source: Path | None = None
     overrides: tuple[str, ...] = ()
     grid: dict[str, Any] = dataclasses.field(default_factory=dict)
+    selection: tuple[str, ...] = ()  # the --only items that cut ``runs`` down (:func:`select_runs`)
 
     @property
     def directory(self) -> Path:
@@ -193,6 +195,87 @@ def _path_safe(text: str) -> str:
 
 def _choices(point: GridPoint) -> str:
     return ", ".join(f"{axis}={label}" for axis, label in point.choices)
+
+
+# ------------------------------------------------------------------------------------------------ selection
+SELECTION_ALIASES = {"seed": "run.seed", "run.method": "method", "run.task": "task"}  # --only's short keys
+_PAIR_START = re.compile(r",\s*(?=[A-Za-z_][\w.]*\s*=)")  # a comma that starts the next key=value pair
+
+
+def run_coordinates(run: SweepRun) -> dict[str, str]:
+    """What ``--only`` selects a run by: the method, task and ``run.seed`` of its name (every run has them) and its
+    label on every axis of the grid (a bundle's name, a plain axis' value as one line of YAML)."""
+    _, method, task, *_ = run.name.split("/")
+    return {"method": method, "task": task, "run.seed": str(run.config.run.seed), **dict(run.point.choices)}
+
+
+def parse_selection(text: str) -> dict[str, str]:
+    """One ``--only`` value: ``key=value`` pairs joined by commas, e.g. ``method=gru,task=mm_grid_1,seed=0``. A comma
+    starts a new pair only where a key and ``=`` follow, so a value such as ``[0, 1]`` stays whole."""
+    selection: dict[str, str] = {}
+    for pair in _PAIR_START.split(text.strip()):
+        key, equals, value = (part.strip() for part in pair.partition("="))
+        if not (key and equals and value):
+            raise SweepError(f"--only {text}: expected key=value pairs joined by commas, e.g. method=gru,seed=0")
+        key = SELECTION_ALIASES.get(key, key)
+        if key in selection:  # a run has one value per key: the pair could never match
+            raise SweepError(
+                f"--only {text} names {key} twice; one --only selects the runs that match all its pairs, "
+                "repeat --only to add the runs of another value"
+            )
+        selection[key] = value
+    return selection
+
+
+def select_runs(panels: Sequence[Panel], only: Sequence[str]) -> list[Panel]:
+    """The panels cut down to the runs ``only`` selects (``scripts/sweep.py --only``): a run is kept when it matches
+    every pair of at least one item (within an item AND, across items OR). Keys are the axes of the grids plus
+    ``method``, ``task`` and ``run.seed`` (``seed``); a key or a value that no run has is an error naming the valid
+    ones, and so is a selection that keeps no run. Panels left without a run are dropped. Without ``only``: the
+    panels as they are."""
+    if not only:
+        return list(panels)
+    selections = [parse_selection(text) for text in only]
+    coordinates = {run.name: run_coordinates(run) for panel in panels for run in panel.runs}
+    valid: dict[str, list[str]] = {}
+    for found in coordinates.values():
+        for key, value in found.items():
+            if value not in valid.setdefault(key, []):
+                valid[key].append(value)
+    where = ", ".join(panel.name for panel in panels)
+    for text, selection in zip(only, selections, strict=True):
+        for key, value in selection.items():
+            if key not in valid:
+                keys = ", ".join(f"{k} (seed)" if k == "run.seed" else k for k in valid)
+                raise SweepError(f"--only {text}: {key!r} is not an axis of {where}; valid keys: {keys}")
+            if _label(value, valid[key]) is None:
+                raise SweepError(
+                    f"--only {text}: no run of {where} has {key}={value}; valid values: {', '.join(valid[key])}"
+                )
+    wanted = [{key: _label(value, valid[key]) for key, value in selection.items()} for selection in selections]
+
+    def selected(run: SweepRun) -> bool:
+        found = coordinates[run.name]
+        return any(all(found.get(key) == value for key, value in selection.items()) for selection in wanted)
+
+    kept = [
+        dataclasses.replace(panel, runs=tuple(filter(selected, panel.runs)), selection=tuple(only)) for panel in panels
+    ]
+    kept = [panel for panel in kept if panel.runs]
+    if not kept:
+        raise SweepError(f"--only {' '.join(only)}: no run of {where} matches all the pairs of one --only")
+    return kept
+
+
+def _label(value: str, labels: Sequence[str]) -> str | None:
+    """The label ``value`` names: itself, or the same value written as the grid writes it (``0.90`` -> ``0.9``)."""
+    if value in labels:
+        return value
+    try:
+        parsed = _short(yaml.safe_load(value), 10_000)
+    except yaml.YAMLError:
+        return None
+    return parsed if parsed in labels else None
 
 
 # ------------------------------------------------------------------------------------------------ states
@@ -705,7 +788,9 @@ def describe(panels: Sequence[Panel], *, width: int = 40) -> str:
     for panel in panels:
         found = statuses(panel.runs)
         source = f"{panel.source} -> " if panel.source else ""
-        lines.append(f"panel {panel.name}: {len(panel.runs)} runs ({source}{panel.directory})")
+        chosen = " selected by " + " ".join(f"--only {item}" for item in panel.selection) if panel.selection else ""
+        count = f"{len(panel.runs)} run{'' if len(panel.runs) == 1 else 's'}"
+        lines.append(f"panel {panel.name}: {count}{chosen} ({source}{panel.directory})")
         lines += _axes_lines(panel)
         name_width = max(len(s.run.name) for s in found)
         lines.append(f"  {'run':<{name_width}}  {'state':<9} {'updates':>13}  overrides (grid)")

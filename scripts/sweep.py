@@ -1,7 +1,8 @@
 """Train a grid of runs (one figure panel per config file), locally or on a SLURM cluster, and evaluate it.
 
     python scripts/sweep.py CONFIG [CONFIG ...] [--launcher local|slurm] [--jobs N] [--root DIR] [--dry-run]
-        [--evaluate] [--set KEY=VALUE ...] [--slurm-partition P --slurm-time T --slurm-gpus N --slurm-cpus N ...]
+        [--evaluate] [--only KEY=VALUE[,KEY=VALUE...] ...] [--set KEY=VALUE ...]
+        [--slurm-partition P --slurm-time T --slurm-gpus N --slurm-cpus N ...]
 
 Every CONFIG's ``grid:`` block expands into runs named ``<panel>/<method>/<task>/seed<k>`` under ``--root`` (default
 ``runs/``); see agents/config.py ("Grids") for the format and agents/sweep.py for the layout. ``--dry-run`` prints the
@@ -22,6 +23,14 @@ in the background; with ``--evaluate`` this command waits for them.
 summary.json, plots); with ``--no-train`` nothing is launched first (say, while SLURM jobs are queued: the local
 launcher would otherwise train their runs here).
 
+``--only KEY=VALUE[,KEY=VALUE...]`` picks runs (cells) of the grids by name, without restating a bundle: the keys are
+the grids' axes (``method``, ``task``, dotted plain axes such as ``ppo.gamma``) and ``run.seed`` (or ``seed``); the
+values are the bundles' names and the axes' values, and a key or value that no run has is an error listing the valid
+ones. One ``--only`` keeps the runs that match all its pairs; repeated, it keeps the runs that match any of them
+(``--only method=gru,seed=0 --only method=ppo`` is GRU's seed 0 and every PPO run). It applies to the dry run, the
+local launcher and SLURM submission alike; ``--evaluate`` still writes each selected panel's results from all its
+finished runs, so a selection never replaces a panel's table with a part of it.
+
 ``--set KEY=VALUE`` applies to every run, after the grid; ``--set grid.AXIS=VALUES`` replaces an axis (e.g.
 ``--set grid.run.seed=[0]``). Exit status: 0 done, 1 some run failed, 2 bad config or arguments.
 """
@@ -37,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 
 from agents.config import ConfigError  # noqa: E402
 from agents.slurm import launch_slurm, wait_for_jobs  # noqa: E402
-from agents.sweep import SweepError, describe, evaluate_panel, launch_local, load_panel  # noqa: E402
+from agents.sweep import SweepError, describe, evaluate_panel, launch_local, load_panel, select_runs  # noqa: E402
 
 # --slurm-* options -> grid.slurm keys, and whether the value is text (quoted so YAML keeps it a string)
 SLURM_OPTIONS = {
@@ -66,6 +75,14 @@ def main(argv: list[str] | None = None) -> int:
         "--no-train", action="store_true", help="launch nothing (e.g. --evaluate while SLURM jobs are still queued)"
     )
     parser.add_argument("--eval-device", default="cpu", help="torch device of the final evaluation (default cpu)")
+    parser.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[,KEY=VALUE...]",
+        help="train, submit, list or evaluate only the runs that match all these pairs (e.g. method=gru,task=mmact_grid"
+        " or seed=0); repeat for more runs (any of them); keys: the grid's axes and run.seed (seed)",
+    )
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override (repeatable)")
     slurm = parser.add_argument_group("SLURM (override the config's grid.slurm block)")
     for option, (_, _, help_text) in SLURM_OPTIONS.items():
@@ -87,13 +104,16 @@ def main(argv: list[str] | None = None) -> int:
         names = [panel.name for panel in panels]
         if len(set(names)) != len(names):
             raise ConfigError(f"two configs name the same panel ({', '.join(names)}): give one a grid.panel")
+        selected = select_runs(panels, args.only)
         if args.dry_run:
-            print(describe(panels), end="")
+            print(describe(selected), end="")
             return 0
-        failed = [] if args.no_train else _train(panels, args)
+        failed = [] if args.no_train else _train(selected, args)
         if args.evaluate:
-            for panel in panels:
-                evaluate_panel(panel, device=args.eval_device)
+            chosen = {panel.name for panel in selected}
+            for panel in panels:  # the whole panel: its results gather every finished run, whatever --only picked
+                if panel.name in chosen:
+                    evaluate_panel(panel, device=args.eval_device)
     except (ConfigError, SweepError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

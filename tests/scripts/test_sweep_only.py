@@ -1,0 +1,93 @@
+"""scripts/sweep.py --only on tiny ProofOfMemory runs: the local launcher trains the selected cells only, --evaluate
+writes the whole panel's results, the dry run lists the selection, SLURM submits the selected runs only, and a bad
+selection exits 2 naming the valid values."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from agents.sweep import FINISHED, NEW, load_panel, statuses
+from scripts import sweep as sweep_script
+
+TINY = {
+    "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
+    "model": {"memory": "gru", "memory_size": 16, "hidden_size": 16, "vector_encoder_size": 8},
+    "ppo": {"epochs": 1, "minibatches": 1},
+    "run": {"total_steps": 2 * 64, "workers": 4, "worker_steps": 16, "torch_threads": 1, "progress_bar": False},
+    "eval": {"seeds": [100_000, 100_001], "repetitions": 1},
+}
+GRID = {"method": {"ppo": {"model.memory": "none"}, "gru": {}}, "task": {"pom": {}}, "run.seed": [0, 1]}
+
+
+def _config(tmp_path: Path) -> Path:
+    path = tmp_path / "cells.yaml"
+    path.write_text(yaml.safe_dump({**TINY, "grid": GRID}, sort_keys=False))
+    return path
+
+
+def _states(config: Path, root: Path) -> dict[str, str]:
+    return {status.run.name: status.state for status in statuses(load_panel(config, root=root).runs)}
+
+
+def test_local_sweep_trains_only_the_selected_cells_and_evaluates_the_whole_panel(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    config, root = _config(tmp_path), tmp_path / "runs"
+    args = [str(config), "--root", str(root)]
+    assert sweep_script.main([*args, "--only", "method=ppo,seed=1", "--evaluate"]) == 0
+    assert _states(config, root) == {
+        "cells/ppo/pom/seed0": NEW,
+        "cells/ppo/pom/seed1": FINISHED,
+        "cells/gru/pom/seed0": NEW,
+        "cells/gru/pom/seed1": NEW,
+    }
+    assert not (root / "cells" / "gru").exists()  # nothing of the runs left out was created
+    summary = json.loads((root / "cells" / "results" / "summary.json").read_text())
+    assert {run["run"] for run in summary["runs"]} == {"cells/ppo/pom/seed1"}
+    assert sorted(summary["unfinished"]) == ["cells/gru/pom/seed0", "cells/gru/pom/seed1", "cells/ppo/pom/seed0"]
+    capsys.readouterr()
+
+    # another cell: trained alone, and the panel's results gather both finished runs (never a part of the panel)
+    assert sweep_script.main([*args, "--only", "method=gru,seed=0", "--evaluate"]) == 0
+    assert [name for name, state in _states(config, root).items() if state == FINISHED] == [
+        "cells/ppo/pom/seed1",
+        "cells/gru/pom/seed0",
+    ]
+    summary = json.loads((root / "cells" / "results" / "summary.json").read_text())
+    assert {run["run"] for run in summary["runs"]} == {"cells/ppo/pom/seed1", "cells/gru/pom/seed0"}
+    out = capsys.readouterr().out
+    assert "start: cells/gru/pom/seed0" in out and "cells/ppo/pom/seed1" not in out.split("final evaluation")[0]
+
+    # the dry run lists the selection with its states; repeated --only adds runs
+    assert sweep_script.main([*args, "--dry-run", "--only", "method=gru", "--only", "seed=1,method=ppo"]) == 0
+    out = capsys.readouterr().out
+    assert "panel cells: 3 runs selected by --only method=gru --only seed=1,method=ppo" in out
+    rows = {line.split()[0]: line.split()[1] for line in out.splitlines() if line.startswith("  cells/")}
+    assert rows == {"cells/ppo/pom/seed1": FINISHED, "cells/gru/pom/seed0": FINISHED, "cells/gru/pom/seed1": NEW}
+
+
+def test_a_bad_selection_exits_2_and_names_the_valid_values(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    config, root = _config(tmp_path), tmp_path / "runs"
+    assert sweep_script.main([str(config), "--root", str(root), "--only", "method=lstm"]) == 2
+    assert "no run of cells has method=lstm; valid values: ppo, gru" in capsys.readouterr().err
+    assert sweep_script.main([str(config), "--root", str(root), "--only", "seed=5", "--dry-run"]) == 2
+    assert "valid values: 0, 1" in capsys.readouterr().err
+    assert not root.exists()  # refused before anything was created
+
+
+def test_slurm_submits_only_the_selected_runs(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    pytest.importorskip("submitit")
+    config, root = _config(tmp_path), tmp_path / "runs"
+    args = [str(config), "--root", str(root), "--launcher", "slurm", "--slurm-cluster", "debug", "--slurm-cpus", "1"]
+    assert sweep_script.main([*args, "--only", "method=gru,seed=1", "--only", "method=ppo,seed=0"]) == 0
+    submitted = [json.loads(line) for line in (root / "cells" / "slurm" / "submissions.jsonl").read_text().splitlines()]
+    assert [entry["run"] for entry in submitted] == ["cells/ppo/pom/seed0", "cells/gru/pom/seed1"]
+    assert sorted(str(path.relative_to(root)) for path in root.glob("cells/*/pom/seed*")) == [
+        "cells/gru/pom/seed1",
+        "cells/ppo/pom/seed0",
+    ]  # only the submitted runs were prepared
+    assert "submitted job" in capsys.readouterr().out
