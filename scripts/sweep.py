@@ -44,7 +44,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
-from agents.config import ConfigError  # noqa: E402
+from agents.config import NAMED_AXES, ConfigError  # noqa: E402
 from agents.slurm import launch_slurm, wait_for_jobs  # noqa: E402
 from agents.sweep import SweepError, describe, evaluate_panel, launch_local, load_panel, select_runs  # noqa: E402
 
@@ -115,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
                 if panel.name in chosen:
                     evaluate_panel(panel, device=args.eval_device)
     except (ConfigError, SweepError, FileNotFoundError) as err:
-        print(f"error: {err}", file=sys.stderr)
+        print(f"error: {err}{_only_hint(args.set)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted: re-run the same command to continue the sweep", file=sys.stderr)
@@ -147,6 +147,16 @@ def _train(panels: list, args: argparse.Namespace) -> list:
         print(f"waiting for {len(submitted)} job(s) (Ctrl-C stops waiting; the jobs go on)")
         outcomes = wait_for_jobs(submitted, poll_s=args.slurm_poll)
     return [outcome for outcome in outcomes if outcome.result == "failed"]
+
+
+def _only_hint(overrides: list[str]) -> str:
+    """A named axis given as a list of its names (``--set grid.method=[gru]``) asks for what --only does: say so."""
+    for item in overrides:
+        key, _, value = (part.strip() for part in item.partition("="))
+        axis = key.removeprefix("grid.")
+        if key.startswith("grid.") and axis in NAMED_AXES and value.startswith("["):
+            return f"\nto train some of the grid's {axis} bundles, select them by name: --only {axis}=NAME"
+    return ""
 
 
 def _slurm_overrides(args: argparse.Namespace) -> list[str]:

@@ -77,6 +77,9 @@ def test_a_bad_selection_exits_2_and_names_the_valid_values(tmp_path: Path, caps
     assert sweep_script.main([str(config), "--root", str(root), "--only", "seed=5", "--dry-run"]) == 2
     assert "valid values: 0, 1" in capsys.readouterr().err
     assert not root.exists()  # refused before anything was created
+    # restating a named axis as a list of its names is refused, and the message points at --only
+    assert sweep_script.main([str(config), "--root", str(root), "--dry-run", "--set", "grid.method=[gru]"]) == 2
+    assert "select them by name: --only method=NAME" in capsys.readouterr().err
 
 
 def test_slurm_submits_only_the_selected_runs(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
