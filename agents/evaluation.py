@@ -29,7 +29,7 @@ from agents.config import Config, check_disjoint_seeds
 from agents.io import atomic_write_bytes, atomic_write_text, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.models import ActorCritic
-from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS, read_episodes
+from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS, config_digest, env_options_text, read_episodes
 from agents.results import summarize as summarize_episodes
 
 RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
@@ -79,6 +79,7 @@ def evaluate(
     if bar is not None:
         bar.close()
     metric = metric_of(config.env.id)
+    options, digest = env_options_text(config), config_digest(config, greedy)  # the columns agents.results checks
     records = []
     for slot in range(slots):
         info = finals[slot]
@@ -96,6 +97,8 @@ def evaluate(
                 "length": int(info["length"]),
                 "metric": float(metric.value(info)),
                 "metric_reference": float(metric.reference(info)),
+                "env_options": options,
+                "config_digest": digest,
                 **{key: value for key, value in extra.items() if _is_number(value)},
             }
         )

@@ -2,8 +2,13 @@
 
 A results directory holds ``episodes.csv`` (one row per evaluated episode, written by the evaluation) and, optionally,
 ``training.csv`` (one row per PPO update of every run). Their first columns are fixed (:data:`EPISODE_COLUMNS`,
-:data:`TRAINING_COLUMNS`); any further numeric column (``success``, ``commands_completed``, ...) is kept and may be
+:data:`TRAINING_COLUMNS`; records written before ``env_options`` and ``config_digest`` existed lack those two and still
+load, with the columns empty); any further numeric column (``success``, ``commands_completed``, ...) is kept and may be
 empty in some rows.
+
+One (method, task) cell pools runs that differ only by their seeds: ``config_digest`` (:func:`config_digest`) names
+what the rest of a run's config sets, and records whose digests disagree within a cell are refused
+(:func:`check_configs`), naming the runs and, where their saved ``config.yaml`` can be found, the keys that differ.
 
 The paper's protocol: a run's score at a checkpoint is the mean of its episodes (30 novel seeds x 5 repetitions);
 runs are aggregated with the interquartile mean and a 95% stratified-bootstrap interval (:mod:`agents.stats`).
@@ -14,26 +19,38 @@ Runs of one method that were evaluated at different checkpoints are compared onl
 from __future__ import annotations
 
 import csv
+import hashlib
+import json
 import math
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from agents import stats
 
+if TYPE_CHECKING:
+    from agents.config import Config
+
 __all__ = [
+    "CONFIG_COLUMN",
     "EPISODE_COLUMNS",
+    "NOT_IN_DIGEST",
+    "OPTIONS_COLUMN",
     "TRAINING_COLUMNS",
     "MethodScores",
     "Records",
     "Results",
     "ResultsWarning",
     "aggregate",
+    "check_configs",
+    "config_digest",
+    "env_options_text",
     "estimate",
+    "experiment_settings",
     "format_table",
     "read_episodes",
     "read_results",
@@ -43,6 +60,7 @@ __all__ = [
     "score_curves",
     "score_matrices",
     "summarize",
+    "task_options",
     "training_curves",
 ]
 
@@ -58,9 +76,14 @@ EPISODE_COLUMNS = (
     "length",
     "metric",
     "metric_reference",
+    "env_options",
+    "config_digest",
 )
-TRAINING_COLUMNS = ("run", "method", "task", "env_id", "step", "return", "length", "metric")
+TRAINING_COLUMNS = ("run", "method", "task", "env_id", "step", "return", "length", "metric", "config_digest")
 TEXT_COLUMNS = ("run", "method", "task", "env_id")
+OPTIONS_COLUMN = "env_options"  # the env's non-default reset options as sorted JSON ("{}": all default)
+CONFIG_COLUMN = "config_digest"  # what defines the experiment, seeds and bookkeeping left out (config_digest())
+OPTIONAL_COLUMNS = (OPTIONS_COLUMN, CONFIG_COLUMN)  # absent from older records: read as empty text
 _INTEGER_COLUMNS = ("step", "seed", "repetition")
 _REQUIRED_VALUES = {  # numeric columns that may not be empty
     "episodes.csv": ("step", "seed", "repetition", "return", "length"),
@@ -144,9 +167,10 @@ class Results:
     directories: tuple[Path, ...]
 
 
-def _parse_csv(path: Path, required: Sequence[str]) -> Records:
+def _parse_csv(path: Path, columns: Sequence[str]) -> Records:
     with path.open(newline="") as handle:
         rows = list(csv.reader(handle))
+    required = [name for name in columns if name not in OPTIONAL_COLUMNS]
     if not rows:
         raise ValueError(f"{path} is empty: expected a header starting with {', '.join(required)}")
     header, body = rows[0], rows[1:]
@@ -164,18 +188,18 @@ def _parse_csv(path: Path, required: Sequence[str]) -> Records:
             raise ValueError(f"{path}, line {line}: {len(row)} fields where the header has {len(header)}")
     cells = list(zip(*body, strict=True)) if body else [() for _ in header]
     must_have = _REQUIRED_VALUES.get(path.name, ())
-    columns: dict[str, np.ndarray] = {}
+    found: dict[str, np.ndarray] = {}
     for index, name in enumerate(header):
         values = cells[index]
-        if name in TEXT_COLUMNS:
-            columns[name] = np.array(values, dtype=str)
+        if name in TEXT_COLUMNS or name in OPTIONAL_COLUMNS:
+            found[name] = np.array(values, dtype=str)
             continue
         numbers = _numbers(values)
         if numbers is None:
             if name in required:
                 line, value = next((i, v) for i, v in enumerate(values, start=2) if _numbers([v]) is None)
                 raise ValueError(f"{path}, line {line}: column {name!r} holds {value!r}, not a number") from None
-            columns[name] = np.array(values, dtype=str)  # an extra column of text: kept as it is
+            found[name] = np.array(values, dtype=str)  # an extra column of text: kept as it is
             continue
         if name in must_have and not np.all(np.isfinite(numbers)):
             line = 2 + int(np.flatnonzero(~np.isfinite(numbers))[0])
@@ -184,13 +208,15 @@ def _parse_csv(path: Path, required: Sequence[str]) -> Records:
             if not np.all(numbers == np.round(numbers)):
                 raise ValueError(f"{path}: column {name!r} holds values that are not whole numbers")
             numbers = numbers.astype(np.int64)
-        columns[name] = numbers
+        found[name] = numbers
     for name in ("run", "method", "env_id"):
-        empty = np.flatnonzero(columns[name] == "")
+        empty = np.flatnonzero(found[name] == "")
         if len(empty):
             raise ValueError(f"{path}, line {2 + int(empty[0])}: column {name!r} is empty")
-    columns["task"] = np.where(columns["task"] == "", columns["env_id"], columns["task"])  # the task defaults to the id
-    return Records(columns)
+    found["task"] = np.where(found["task"] == "", found["env_id"], found["task"])  # the task defaults to the id
+    for name in columns:  # older records lack the optional columns: empty text, in their place
+        found.setdefault(name, np.full(len(body), "", dtype=str))
+    return Records({**{name: found[name] for name in columns}, **found})
 
 
 def _numbers(values: Sequence[str]) -> np.ndarray | None:
@@ -246,6 +272,176 @@ def _check_unique(records: Records, keys: Sequence[str], what: str) -> None:
         raise ValueError(f"{what}: {int(counts.max())} rows for the same {described} (the same run read twice?)")
 
 
+# ------------------------------------------------------------------------------------ what defines an experiment
+NOT_IN_DIGEST = {  # config keys that do not change the experiment a run belongs to, and why
+    "run.seed": "seed: the runs of a cell are its seeds",
+    "model.helm.seed": "seed of HELM's random projection (and random transformer): another draw, not another agent",
+    "eval.seed": "seed of the evaluation's action sampling",
+    "eval.seeds": "which novel seeds: a sample of the same level distribution",
+    "eval.repetitions": "episodes per novel seed: how precise a score is, not what it measures",
+    "eval.interval": "how often the curve is sampled",
+    "run.method": "a name: the cell's own key",
+    "run.task": "a name: the cell's own key",
+    "run.device": "where the run computes",
+    "run.torch_threads": "how fast the run computes",
+    "run.checkpoint_interval": "bookkeeping (a resumed run replays the same steps)",
+    "run.keep_checkpoints": "bookkeeping",
+    "run.progress_bar": "display",
+    "grid": "a run's config holds no grid",
+}
+
+
+def experiment_settings(config: Config, greedy: bool | None = None, changed_only: bool = True) -> dict[str, Any]:
+    """What defines the experiment of a run, as ``{dotted key: value}``: every config key but :data:`NOT_IN_DIGEST`,
+    the env's reset options resolved (``env.options.<name>``), and ``eval.greedy`` as the evaluation used it
+    (``greedy``; default: the config's). ``changed_only``: only the values that differ from the defaults (of
+    :class:`agents.config.Config` and of the env's options), so that a field added to the config later leaves the
+    settings of existing configs unchanged."""
+    from agents.config import Config, config_to_dict, resolved_options
+
+    def flat(config: Config, changed: bool, greedy: bool | None = None) -> dict[str, Any]:
+        tree = config_to_dict(config)
+        tree["env"]["options"] = resolved_options(config.env.id, config.env.options, changed_only=changed)
+        if greedy is not None:
+            tree["eval"]["greedy"] = bool(greedy)
+        return {key: value for key, value in _flatten(tree).items() if key not in NOT_IN_DIGEST}
+
+    found = flat(config, changed_only, greedy)
+    if not changed_only:
+        return found
+    defaults = flat(Config(), False)
+    return {key: value for key, value in found.items() if key not in defaults or defaults[key] != value}
+
+
+def config_digest(config: Config, greedy: bool | None = None) -> str:
+    """The ``config_digest`` column: ``c`` and the first 12 hex digits of the SHA-256 of :func:`experiment_settings`
+    (changed values only) as sorted, compact JSON; the letter keeps CSV readers from taking it for a number. Runs
+    that differ only in seeds, names, device, threads or bookkeeping (:data:`NOT_IN_DIGEST`) share it; the same
+    config gives the same digest in any process and on any machine."""
+    text = json.dumps(experiment_settings(config, greedy), sort_keys=True, separators=(",", ":"))
+    return "c" + hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def env_options_text(config: Config) -> str:
+    """The ``env_options`` column: the env's non-default reset options as sorted, compact JSON (``{}``: defaults)."""
+    from agents.config import resolved_options
+
+    changed = resolved_options(config.env.id, config.env.options, changed_only=True)
+    return json.dumps(changed, sort_keys=True, separators=(",", ":"))
+
+
+def _flatten(tree: Any, prefix: str = "") -> dict[str, Any]:
+    if not isinstance(tree, Mapping):
+        return {prefix: tree}
+    found: dict[str, Any] = {}
+    for key, value in tree.items():
+        found.update(_flatten(value, f"{prefix}.{key}" if prefix else str(key)))
+    return found
+
+
+def check_configs(records: Records, what: str, directories: Sequence[str | Path] = ()) -> None:
+    """Refuse records whose runs of one (method, task) cell have different ``config_digest`` values: such runs are
+    different experiments, not seeds of one. A run's digest is that of its latest rows (a run lengthened on resume
+    changes ``run.total_steps`` midway). The error names the cell, the runs of every digest and, where a run's saved
+    ``config.yaml`` is found next to ``directories`` (``<dir or its parents>/<run>/config.yaml``), the keys that
+    differ. Rows without a digest (older records) are not checked."""
+    if CONFIG_COLUMN not in records or not len(records):
+        return
+    known = records.select(records[CONFIG_COLUMN].astype(str) != "")
+    if not len(known):
+        return
+    ids = _run_ids(known)
+    order = np.lexsort((known["step"], ids))
+    last = order[np.append(ids[order][1:] != ids[order][:-1], True)]  # every run's row of its largest step
+    known = known.select(last)
+    cells = np.stack([known["method"].astype(str), known["task"].astype(str), known[CONFIG_COLUMN].astype(str)])
+    pairs, counts = np.unique(np.unique(cells, axis=1)[:2], axis=1, return_counts=True)  # digests per cell
+    if not np.any(counts > 1):
+        return
+    method, task = (str(name) for name in pairs[:, np.flatnonzero(counts > 1)[0]])
+    rows = known.where(method=method, task=task)
+    by_digest = {
+        digest: sorted(set(rows["run"][rows[CONFIG_COLUMN] == digest].tolist()))
+        for digest in np.unique(rows[CONFIG_COLUMN]).tolist()
+    }
+    groups = "; ".join(f"{digest}: run(s) {', '.join(runs)}" for digest, runs in by_digest.items())
+    raise ValueError(
+        f"{what}: method {method!r}, task {task!r} holds runs whose configs differ in more than the seed "
+        f"(config_digest {groups}). {_differences(by_digest, directories)} Give them different run.method or "
+        "run.task names, or read their results apart."
+    )
+
+
+def _differences(by_digest: Mapping[str, Sequence[str]], directories: Sequence[str | Path]) -> str:
+    """The keys whose values differ between the saved configs of one run per digest, as a sentence."""
+    settings = {}
+    for digest, runs in by_digest.items():
+        found = next((s for s in (_saved_settings(run, directories) for run in runs) if s is not None), None)
+        if found is None:
+            return "Their config.yaml files were not found next to the results: compare the runs' configs."
+        settings[digest] = found
+    keys = sorted(set().union(*settings.values()))
+    differing = [key for key in keys if len({json.dumps(s.get(key), sort_keys=True) for s in settings.values()}) > 1]
+    if not differing:
+        return (
+            "Their saved configs agree on every key the digest covers: the records were evaluated differently "
+            "(eval.greedy) or written by another version."
+        )
+    shown = [
+        f"{key} ({', '.join(f'{json.dumps(s.get(key))} in {d}' for d, s in settings.items())})" for key in differing
+    ]
+    more = f" and {len(shown) - 8} more" if len(shown) > 8 else ""
+    return f"Differing keys: {'; '.join(shown[:8])}{more}."
+
+
+def _saved_settings(run: str, directories: Sequence[str | Path]) -> dict[str, Any] | None:
+    config = _saved_config(run, directories)
+    return None if config is None else experiment_settings(config, changed_only=False)
+
+
+def _saved_config(run: str, directories: Sequence[str | Path]) -> Config | None:
+    """``run``'s saved config, looked up as ``<dir>/<run>``, ``<dir>/../<run>`` and ``<dir>/../../<run>`` (a run's
+    own directory or its ``eval/``, a sweep's ``<root>/<panel>/results``); None if not found or not readable."""
+    from agents.config import config_from_dict, read_config_file
+
+    for directory in directories:
+        directory = Path(directory).resolve()
+        for base in (directory, *directory.parents[:2]):
+            path = base / run / "config.yaml"
+            if path.is_file():
+                try:
+                    return config_from_dict(read_config_file(path))
+                except (ValueError, OSError):  # ConfigError is a ValueError; another version's config, say
+                    return None
+    return None
+
+
+def task_options(records: Records, directories: Sequence[str | Path] = ()) -> dict[str, dict[str, Any] | None]:
+    """Per task, the non-default reset options of its environment: from the ``env_options`` column, else (older
+    records) from the saved configs of its runs found next to ``directories`` (as :func:`check_configs` finds them);
+    None where they are unknown or the task's runs disagree."""
+    from agents.config import resolved_options
+
+    found: dict[str, dict[str, Any] | None] = {}
+    texts = records[OPTIONS_COLUMN].astype(str) if OPTIONS_COLUMN in records else np.full(len(records), "")
+    for task in np.unique(records["task"]).tolist():
+        mine = records["task"] == task
+        values = set(texts[mine].tolist())
+        if len(values) == 1 and "" not in values:
+            found[task] = json.loads(values.pop())
+            continue
+        options = set()
+        for run in np.unique(records["run"][mine]).tolist():
+            config = _saved_config(run, directories)
+            if config is None:
+                options.add(None)
+                break
+            changed = resolved_options(config.env.id, config.env.options, changed_only=True)
+            options.add(json.dumps(changed, sort_keys=True))
+        found[task] = json.loads(options.pop()) if len(options) == 1 and None not in options else None
+    return found
+
+
 def read_episodes(*directories: str | Path) -> Records:
     """The ``episodes.csv`` of every directory, concatenated and checked (columns, one method/task per run)."""
     if not directories:
@@ -262,6 +458,7 @@ def read_episodes(*directories: str | Path) -> Records:
     what = "episodes.csv of " + ", ".join(map(str, directories))
     _check_runs(records, what)
     _check_unique(records, (*RUN_KEYS, "step", "seed", "repetition"), what)
+    check_configs(records, what, directories)
     return records
 
 
@@ -282,6 +479,7 @@ def read_training(*directories: str | Path) -> Records | None:
     what = "training.csv of " + ", ".join(map(str, directories))
     _check_runs(records, what)
     _check_unique(records, (*RUN_KEYS, "step"), what)
+    check_configs(records, what, directories)
     return records
 
 
@@ -319,6 +517,7 @@ def run_scores(episodes: Records, column: str = "metric") -> Records:
         raise KeyError(f"no column {column!r} in the episodes; columns: {', '.join(episodes.names)}")
     if episodes[column].dtype.kind not in "fiu":
         raise ValueError(f"column {column!r} is not numeric")
+    check_configs(episodes, "episodes")  # records built in memory are checked here, read ones also when read
     values = np.asarray(episodes[column], dtype=np.float64)
     keys, group = _groups(episodes, (*RUN_KEYS, "step"))
     present = np.isfinite(values)
@@ -594,6 +793,7 @@ def training_curves(
     step to the earliest last step of the runs (runs that end earlier cut the curve, with a warning).
     """
     found: dict[tuple[str, str], MethodScores] = {}
+    check_configs(training, "training logs")
     keys, _ = _groups(training, ("method", "task"))
     for method, task in zip(keys["method"].tolist(), keys["task"].tolist(), strict=True):
         rows = training.where(method=method, task=task)

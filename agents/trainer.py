@@ -56,7 +56,7 @@ from agents.evaluation import evaluate, read_records, record_means, seed_list, w
 from agents.io import atomic_write_text, now, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.ppo import explained_variance, gae_advantages, ppo_update
-from agents.results import TRAINING_COLUMNS
+from agents.results import TRAINING_COLUMNS, config_digest
 from agents.sequences import split_sequences
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
@@ -336,6 +336,7 @@ class Trainer:
             "return": metrics.get("charts/episodic_return", ""),
             "length": metrics.get("charts/episodic_length", ""),
             "metric": metrics.get(f"charts/{metric.name}", ""),
+            "config_digest": config_digest(self.config),
         }
 
     # ------------------------------------------------------------------------------------------ checkpoints

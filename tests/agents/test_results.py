@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import re
+import subprocess
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -10,8 +14,13 @@ import numpy as np
 import pytest
 
 from agents import results, stats
-from agents.results import EPISODE_COLUMNS, ResultsWarning
+from agents.config import MAX_TASK_NAME, check_name, dump_config, load_config, task_name
+from agents.results import EPISODE_COLUMNS, Records, ResultsWarning
+from agents.sweep import load_panel
+from agents.trainer import Trainer
 from tests.support.synthetic_results import episode_rows, training_rows, write_csv, write_results
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture
@@ -285,3 +294,207 @@ def test_format_table() -> None:
     text = results.format_table([{"method": "gru", "iqm": 0.5, "episodes": None}, {"method": "ppo", "iqm": 0.25}])
     assert text.splitlines() == ["method     iqm  episodes", "   gru  0.5000         -", "   ppo  0.2500         -"]
     assert results.format_table([]) == "(no rows)"
+
+
+# ------------------------------------------------------------------ C7: one (method, task) cell is one experiment
+QUICKSTART = ROOT / "configs" / "quickstart.yaml"  # ProofOfMemory-v0, delay 16
+POM_GRU = ROOT / "configs" / "proof_of_memory" / "gru.yaml"  # ProofOfMemory-v0, delay 4 (the default)
+
+
+def test_default_task_names_tell_option_sets_apart() -> None:
+    """The quickstart (delay 16) and configs/proof_of_memory/gru.yaml (delay 4) were one task "ProofOfMemory-v0"."""
+    assert load_config(QUICKSTART).task == "ProofOfMemory-v0+delay=16"
+    assert load_config(POM_GRU).task == "ProofOfMemory-v0", "default options keep the plain id (older records)"
+    assert task_name("ProofOfMemory-v0", {}) == task_name("ProofOfMemory-v0", {"delay": 4}) == "ProofOfMemory-v0"
+    assert task_name("ProofOfMemory-v0", {"delay": 16, "reward_correct": 1}) == "ProofOfMemory-v0+delay=16"
+    name = task_name("MortarMayhem-Grid-v0", {"visual_feedback": False, "command_count": [1, 2]})
+    assert name == "MortarMayhem-Grid-v0+command_count=1_2+visual_feedback=false"  # sorted by key
+    assert task_name("ProofOfMemory-v0", {"reward_wrong": -1}) == "ProofOfMemory-v0+reward_wrong=-1.0"
+    assert load_config(QUICKSTART, ["run.task=mine"]).task == "mine", "a given run.task wins"
+    many = {"max_steps": 300, "agent_speed": 2.5, "agent_health": 100, "num_coins": [2], "coins_visible": True}
+    long = task_name("SearingSpotlights-v0", many)
+    assert len(long) <= MAX_TASK_NAME and re.fullmatch(r"SearingSpotlights-v0\+options=[0-9a-f]{12}", long)
+    assert task_name("SearingSpotlights-v0", dict(reversed(many.items()))) == long, "independent of the key order"
+    for task in (load_config(QUICKSTART).task, name, long):
+        check_name("task", task)  # a file name (sweeps make it a directory) and a plain CSV field
+        assert "," not in task and '"' not in task
+
+
+def test_config_digest_ignores_seeds_and_bookkeeping_only() -> None:
+    base = load_config(QUICKSTART)
+    digest = results.config_digest(base)
+    assert re.fullmatch(r"c[0-9a-f]{12}", digest)
+    same = [
+        "run.seed=5",
+        "run.device=cuda",
+        "run.torch_threads=2",
+        "run.checkpoint_interval=3",
+        "run.keep_checkpoints=0",
+        "run.progress_bar=false",
+        "run.method=other",
+        "run.task=other",
+        "eval.interval=4",
+        "eval.seed=3",
+        "eval.seeds=[200000,200009]",
+        "eval.repetitions=2",
+        "model.helm.seed=9",
+        "env.options={delay: 16, reward_correct: 1}",  # the same options written out
+    ]
+    for override in same:
+        assert results.config_digest(load_config(QUICKSTART, [override])) == digest, override
+    different = [
+        "ppo.gamma=0.9",
+        "env.options={delay: 8}",
+        "model.memory_size=32",
+        "run.workers=8",
+        "run.total_steps=65536",
+        "run.precision=bf16",
+        "env.train_seeds=[0,9]",
+        "env.frame_skip=2",
+        "eval.greedy=true",
+    ]
+    digests = {override: results.config_digest(load_config(QUICKSTART, [override])) for override in different}
+    assert digest not in digests.values() and len(set(digests.values())) == len(different), digests
+    assert results.config_digest(base, greedy=True) == digests["eval.greedy=true"], "as the evaluation played"
+    assert set(results.NOT_IN_DIGEST) >= {"run.seed", "run.device", "run.torch_threads", "run.checkpoint_interval"}
+
+
+def test_task_names_and_digests_are_the_same_in_another_process() -> None:
+    code = (
+        "from agents.config import load_config; from agents.results import config_digest;"
+        f"c = load_config({str(QUICKSTART)!r}); print(c.task, config_digest(c))"
+    )
+    env = {**os.environ, "PYTHONHASHSEED": "12345"}
+    shown = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
+    config = load_config(QUICKSTART)
+    assert shown.stdout.split() == [config.task, results.config_digest(config)]
+
+
+def test_the_seeds_of_a_sweep_cell_share_a_digest() -> None:
+    """configs/cpu/mm_grid_1.yaml: 5 methods x 3 seeds; the seeds of one cell agree, the cells differ, and the
+    committed runs' saved configs (torch threads set by the sweep) give their cell's digest."""
+    panel = load_panel(ROOT / "configs" / "cpu" / "mm_grid_1.yaml", root=ROOT / "results" / "cpu")
+    cells = defaultdict(set)
+    for run in panel.runs:
+        cells[(run.config.method, run.config.task)].add(results.config_digest(run.config))
+    assert len(cells) == 5 and all(len(digests) == 1 for digests in cells.values()), cells
+    assert len({digest for digests in cells.values() for digest in digests}) == 5
+    for run in panel.runs:
+        saved = run.run_dir / "config.yaml"
+        if saved.is_file():
+            config = load_config(saved)
+            assert {results.config_digest(config)} == cells[(run.config.method, run.config.task)], run.name
+
+
+def digest_rows(runs: dict[str, str], method: str = "gru", steps: tuple[int, ...] = (10,)) -> list[dict]:
+    """Episode rows of one method and task (ProofOfMemory-v0), run name -> digest (a digest per step with '|')."""
+    rows = []
+    for index, (run, digests) in enumerate(runs.items()):
+        for step, digest in zip(steps, digests.split("|") * len(steps), strict=False):
+            for seed in range(2):
+                rows.append(
+                    {
+                        **episode_rows(methods=(method,), runs=1, steps=(step,), seeds=1, repetitions=1)[0],
+                        "run": run,
+                        "seed": 100 + seed,
+                        "metric": float((index + seed) % 2),
+                        "config_digest": digest,
+                    }
+                )
+    return rows
+
+
+def test_runs_with_different_configs_in_one_cell_are_refused(tmp_path: Path) -> None:
+    rows = digest_rows({"seed0": "caaaaaaaaaaaa", "seed1": "caaaaaaaaaaaa", "other": "cbbbbbbbbbbbb"})
+    write_csv(tmp_path / "r" / "episodes.csv", rows, EPISODE_COLUMNS)
+    with pytest.raises(ValueError) as err:
+        results.read_episodes(tmp_path / "r")
+    message = str(err.value)
+    assert "method 'gru', task 'ProofOfMemory-v0'" in message and "differ in more than the seed" in message
+    assert "caaaaaaaaaaaa: run(s) seed0, seed1" in message and "cbbbbbbbbbbbb: run(s) other" in message
+    assert "config.yaml files were not found" in message
+    with pytest.raises(ValueError, match="differ in more than the seed"):  # records built in memory, too
+        results.aggregate(Records({name: np.array([row[name] for row in rows]) for name in rows[0]}))
+    # with the runs' saved configs beside the results, the differing keys are named
+    for run, overrides in (
+        ("seed0", []),
+        ("seed1", ["run.seed=1"]),
+        ("other", ["ppo.gamma=0.9", "env.options.delay=8"]),
+    ):
+        (tmp_path / "r" / run).mkdir()
+        (tmp_path / "r" / run / "config.yaml").write_text(dump_config(load_config(QUICKSTART, overrides)))
+    with pytest.raises(
+        ValueError, match="Differing keys: env.options.delay \\(16 in caaaaaaaaaaaa, 8 in cbbbbbbbbbbbb\\); ppo.gamma"
+    ):
+        results.read_episodes(tmp_path / "r")
+    # training logs are checked the same way
+    training = training_rows(methods=("gru",), tasks={"T": "ProofOfMemory-v0"}, runs=2, updates=3)
+    for row in training:
+        row["config_digest"] = "caaaaaaaaaaaa" if row["run"].endswith("0") else "cbbbbbbbbbbbb"
+    write_csv(tmp_path / "t" / "training.csv", training, results.TRAINING_COLUMNS)
+    with pytest.raises(ValueError, match="training.csv of .*method 'gru', task 'T'"):
+        results.read_training(tmp_path / "t")
+
+
+def test_configs_are_compared_within_a_cell_and_by_each_runs_latest_rows(tmp_path: Path) -> None:
+    """Other methods may differ; rows without a digest (older records) are not checked; a run lengthened on resume
+    changes its digest midway, and its latest rows count."""
+    rows = digest_rows({"seed0": "caaaaaaaaaaaa", "seed1": ""}) + digest_rows({"seed0": "cbbbbbbbbbbbb"}, "ppo")
+    write_csv(tmp_path / "a" / "episodes.csv", rows, EPISODE_COLUMNS)
+    assert len(results.aggregate(results.read_episodes(tmp_path / "a"), reps=50)) == 2
+    extended = digest_rows({"seed0": "caaaaaaaaaaaa|cbbbbbbbbbbbb", "seed1": "cbbbbbbbbbbbb"}, steps=(10, 20))
+    write_csv(tmp_path / "b" / "episodes.csv", extended, EPISODE_COLUMNS)
+    assert len(results.read_episodes(tmp_path / "b")) == len(extended)
+    reverted = digest_rows({"seed0": "caaaaaaaaaaaa|cbbbbbbbbbbbb", "seed1": "caaaaaaaaaaaa"}, steps=(10, 20))
+    write_csv(tmp_path / "c" / "episodes.csv", reverted, EPISODE_COLUMNS)
+    with pytest.raises(ValueError, match="cbbbbbbbbbbbb: run\\(s\\) seed0"):
+        results.read_episodes(tmp_path / "c")
+
+
+@pytest.mark.parametrize("directory", ["results/cpu/mm_grid_1/results", "results/examples/proof_of_memory"])
+def test_committed_records_without_the_new_columns_still_load(directory: str) -> None:
+    loaded = results.read_results(ROOT / directory)
+    for table in (loaded.episodes, loaded.training):
+        assert set(table[results.CONFIG_COLUMN].tolist()) == {""}
+    assert set(loaded.episodes[results.OPTIONS_COLUMN].tolist()) == {""}
+    assert len(results.aggregate(loaded.episodes, steps="last", reps=50))
+
+
+def test_task_options_come_from_the_records_or_the_saved_configs(tmp_path: Path) -> None:
+    committed = ROOT / "results" / "cpu" / "mm_grid_1" / "results"
+    episodes = results.read_episodes(committed)
+    assert results.task_options(episodes, [committed]) == {"mm_grid_1": {"command_count": [1]}}
+    assert results.task_options(episodes) == {"mm_grid_1": None}, "no column, no config found: unknown"
+    rows = episode_rows(methods=("gru",), runs=2, steps=(10,), seeds=1, repetitions=1)
+    for row in rows:
+        row["env_options"] = '{"delay":16}' if row["env_id"] == "ProofOfMemory-v0" else "{}"
+    write_csv(tmp_path / "r" / "episodes.csv", rows, EPISODE_COLUMNS)
+    assert results.task_options(results.read_episodes(tmp_path / "r")) == {
+        "MortarMayhem-Grid-v0": {},
+        "ProofOfMemory-v0": {"delay": 16},
+    }
+
+
+def test_training_and_evaluation_write_the_task_options_and_digest(tmp_path: Path) -> None:
+    overrides = [
+        "model.memory_size=8",
+        "model.hidden_size=8",
+        "run.total_steps=64",
+        "run.workers=4",
+        "run.worker_steps=16",
+        "run.progress_bar=false",
+        "run.torch_threads=1",
+        "eval.interval=1",
+        "eval.seeds=[100000,100001]",
+        "eval.repetitions=1",
+    ]
+    config = load_config(QUICKSTART, overrides)
+    Trainer(config, tmp_path / "run").train()
+    loaded = results.Results(
+        results.read_episodes(tmp_path / "run" / "eval"), results.read_training(tmp_path / "run"), ()
+    )
+    digest = results.config_digest(config)
+    assert loaded.episodes.names[: len(EPISODE_COLUMNS)] == list(EPISODE_COLUMNS)
+    assert set(loaded.episodes["task"].tolist()) == set(loaded.training["task"].tolist()) == {config.task}
+    assert set(loaded.episodes["env_options"].tolist()) == {'{"delay":16}'}
+    assert set(loaded.episodes["config_digest"].tolist()) == set(loaded.training["config_digest"].tolist()) == {digest}

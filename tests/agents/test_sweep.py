@@ -190,13 +190,13 @@ def test_slurm_time_limits() -> None:
 def test_run_names_and_panels() -> None:
     panel = panel_from_dict({**TINY, "grid": {"run.seed": [0, 1], "ppo.gamma": [0.9, 0.99], "panel": "p1"}})
     assert [run.name for run in panel.runs] == [  # another plain axis than run.seed names its value
-        "p1/gru/ProofOfMemory-v0/ppo.gamma=0.9/seed0",
-        "p1/gru/ProofOfMemory-v0/ppo.gamma=0.99/seed0",
-        "p1/gru/ProofOfMemory-v0/ppo.gamma=0.9/seed1",
-        "p1/gru/ProofOfMemory-v0/ppo.gamma=0.99/seed1",
+        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.9/seed0",
+        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.99/seed0",
+        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.9/seed1",
+        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.99/seed1",
     ]
     single = panel_from_dict(TINY, name="solo")  # a config without a grid is one run
-    assert [run.name for run in single.runs] == ["solo/gru/ProofOfMemory-v0/seed0"]
+    assert [run.name for run in single.runs] == ["solo/gru/ProofOfMemory-v0+delay=3/seed0"]
     with pytest.raises(ConfigError, match="both make the run"):  # values that differ only in unsafe characters
         panel_from_dict({**TINY, "grid": {"model.helm.lm": ["a b", "a_b"]}}, name="p")
     with pytest.raises(ConfigError, match="grid.panel"):
@@ -224,7 +224,8 @@ def test_states_mismatches_and_locks(tmp_path: Path) -> None:
     changed = panel_from_dict(raw, ["ppo.gamma=0.5", "run.torch_threads=0"], root=tmp_path, name="p")
     with pytest.raises(SweepError) as err:
         statuses(changed.runs)
-    assert "p/gru/ProofOfMemory-v0/seed0" in str(err.value) and "ppo.gamma: saved 0.99, now 0.5" in str(err.value)
+    assert "p/gru/ProofOfMemory-v0+delay=3/seed0" in str(err.value)
+    assert "ppo.gamma: saved 0.99, now 0.5" in str(err.value)
     assert "torch_threads" not in str(err.value)  # fixed by the launcher, not a difference
     explicit = panel_from_dict(raw, ["run.torch_threads=2"], root=tmp_path, name="p")
     with pytest.raises(SweepError, match="run.torch_threads: saved 3, now 2"):

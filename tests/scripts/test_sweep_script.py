@@ -85,7 +85,8 @@ def test_local_sweep_end_to_end_with_evaluate(tmp_path: Path, capsys: pytest.Cap
     assert sorted({(r["run"], r["step"]) for r in records}) == sorted((n, s) for n in names for s in (128, 192))
     assert {r["method"] for r in records} == {"ppo", "gru"} and {r["task"] for r in records} == {"pom"}
     training = (results / "training.csv").read_text().splitlines()
-    assert training[0] == "run,method,task,env_id,step,return,length,metric" and len(training) == 1 + 2 * 3
+    header = "run,method,task,env_id,step,return,length,metric,config_digest"
+    assert training[0] == header and len(training) == 1 + 2 * 3
     for name in names:
         run_dir = root.joinpath(*name.split("/"))
         config_saved = yaml.safe_load((run_dir / "config.yaml").read_text())
