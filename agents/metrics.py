@@ -6,26 +6,41 @@ tiles or coins of an episode. Mortar Mayhem's own ``success`` and ``commands_com
 failed last check still counts as passed): ``metric`` counts only the checks actually passed (the environment's
 ``checks_passed``), while ``metric_reference`` keeps the figure the reference reports, for comparison with
 published numbers.
+
+Each metric also knows its range (plots fix their axis to it) and, where the task has one, its chance level: what a
+policy without memory scores. The chance level may depend on the environment's reset options (all of them, the
+defaults resolved); it is None where it is unknown, e.g. when the options are not known.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 Info = Mapping[str, Any]
+Options = Mapping[str, Any]  # an environment's reset options, every one resolved (defaults included)
 
 
 @dataclass(frozen=True)
 class Metric:
     """A task's metric: its short ``name``, the axis ``label`` of plots, and how an episode's final info gives it
-    (``value``: the paper's metric, corrected; ``reference``: as the reference reports it)."""
+    (``value``: the paper's metric, corrected; ``reference``: as the reference reports it). ``low`` / ``high``: the
+    range of its values (None: unbounded on that side); ``chance``: the chance level for the given options (None
+    for unknown options), None where the task has no meaningful one."""
 
     name: str
     label: str
     value: Callable[[Info], float]
     reference: Callable[[Info], float]
+    low: float | None = None
+    high: float | None = None
+    chance: Callable[[Options | None], float | None] | None = None
+
+    def chance_level(self, options: Options | None) -> float | None:
+        """The chance level of this metric with these resolved options; None where there is none or it is unknown."""
+        return None if self.chance is None else self.chance(options)
 
 
 def _key(name: str) -> Callable[[Info], float]:
@@ -42,17 +57,39 @@ def _task_progress(info: Info) -> float:
     return 1.0 if info["success"] else 0.5 * float(info["coins_collected"])
 
 
-SUCCESS = Metric("success", "Success Rate", _key("success"), _key("success"))
-COMMANDS = Metric("commands_executed", "Commands Executed", _commands_executed, _key("commands_completed"))
-ENDLESS_COMMANDS = Metric("commands_executed", "Commands Executed", _key("checks_passed"), _key("commands_completed"))
-TILES = Metric("tiles_visited", "Tiles Visited", _key("tiles_visited"), _key("tiles_visited"))
-PROGRESS = Metric("task_progress", "Task Progress", _task_progress, _task_progress)
-COINS = Metric("coins_collected", "Coins Collected", _key("coins_collected"), _key("coins_collected"))
+def _guessed_commands(options: Options | None) -> float | None:
+    """Mortar Mayhem with a clue phase: the expected fraction of commands executed by guessing every command
+    uniformly among the ``allowed_commands`` (probability p = 1 / allowed), the episode ending at the first failed
+    check: for n commands sum(p^k, k = 1..n) / n, averaged over the ``command_count`` entries (one is drawn per
+    episode). One command out of the grid's five: 0.2. An agent without memory that reads its position off the frame
+    can do slightly better at the arena's edge, where fewer commands are valid."""
+    if options is None:
+        return None
+    p = 1.0 / options["allowed_commands"]
+    counts = options["command_count"]
+    return sum(sum(p**k for k in range(1, n + 1)) / n for n in counts) / len(counts)
 
+
+SUCCESS = Metric("success", "Success Rate", _key("success"), _key("success"), low=0.0, high=1.0)
+CUE_SUCCESS = dataclasses.replace(SUCCESS, chance=lambda options: 0.5)  # either side, whatever the options
+COMMANDS = Metric(
+    "commands_executed", "Commands Executed", _commands_executed, _key("commands_completed"), low=0.0, high=1.0
+)
+GUESSED_COMMANDS = dataclasses.replace(COMMANDS, chance=_guessed_commands)
+ENDLESS_COMMANDS = Metric(
+    "commands_executed", "Commands Executed", _key("checks_passed"), _key("commands_completed"), low=0.0
+)
+TILES = Metric("tiles_visited", "Tiles Visited", _key("tiles_visited"), _key("tiles_visited"), low=0.0)
+PROGRESS = Metric("task_progress", "Task Progress", _task_progress, _task_progress, low=0.0, high=1.0)
+COINS = Metric("coins_collected", "Coins Collected", _key("coins_collected"), _key("coins_collected"), low=0.0)
+
+# Chance levels: the cue task's 0.5 and Mortar Mayhem's guessed commands (with a clue phase; the act-only B variants
+# show the commands throughout in their vector observation, so guessing is no baseline there). Mystery Path,
+# Searing Spotlights and the endless tasks have no closed-form chance level and draw none.
 METRICS: dict[str, Metric] = {
-    "ProofOfMemory-v0": SUCCESS,
-    "MortarMayhem-v0": COMMANDS,
-    "MortarMayhem-Grid-v0": COMMANDS,
+    "ProofOfMemory-v0": CUE_SUCCESS,
+    "MortarMayhem-v0": GUESSED_COMMANDS,
+    "MortarMayhem-Grid-v0": GUESSED_COMMANDS,
     "MortarMayhemB-v0": COMMANDS,
     "MortarMayhemB-Grid-v0": COMMANDS,
     "Endless-MortarMayhem-v0": ENDLESS_COMMANDS,

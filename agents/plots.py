@@ -5,12 +5,20 @@ Figures are built on ``matplotlib.figure.Figure`` with an Agg canvas (no pyplot,
 is imported inside the functions), returned for display and written as PNG and PDF through
 :func:`agents.io.atomic_write_bytes`. Every method keeps one colour: the known agents have fixed Okabe-Ito colours,
 any other method takes the next spare colour in the sorted order of the unknown names.
+
+Methods are labelled as in the paper (:data:`METHOD_LABELS`: PPO, GRU-PPO, 4-Stack, ...), tasks by their environment
+id and non-default options (:func:`task_title`). A metric with a known range (:mod:`agents.metrics`: success and
+commands executed in [0, 1], counts from 0) is shown on that whole range unless ``zoom`` is set, and a dashed line
+marks the task's chance level where the metric table knows it for the task's options.
 """
 
 from __future__ import annotations
 
 import io
-from collections.abc import Iterable, Sequence
+import json
+import textwrap
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,7 +26,7 @@ import numpy as np
 
 from agents import results
 from agents.io import atomic_write_bytes
-from agents.metrics import METRICS
+from agents.metrics import METRICS, metric_of
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -26,13 +34,18 @@ if TYPE_CHECKING:
 
 __all__ = [
     "METHOD_COLORS",
+    "METHOD_LABELS",
     "SPARE_COLORS",
+    "chance_level",
     "curves_figure",
     "final_figure",
     "method_colors",
+    "method_label",
     "metric_label",
+    "metric_range",
     "plot_results",
     "save_figure",
+    "task_title",
 ]
 
 METHOD_COLORS = {  # Okabe-Ito, colour-blind safe; fixed per method in every figure
@@ -56,8 +69,23 @@ SPARE_COLORS = (  # for other methods, in this order: Paul Tol's muted scheme, t
     "#ddcc77",
     "#f0e442",
 )
+METHOD_LABELS = {  # the paper's names of the agents, keyed by the method names of configs/ (run.method, Config.method)
+    "ppo": "PPO",
+    "gru": "GRU-PPO",
+    "lstm": "LSTM-PPO",
+    "stack4": "4-Stack",
+    "stack16": "16-Stack",
+    "helm": "HELM",
+    "trxl": "TrXL-PPO",
+}
+PART_LABELS = {"gru": "GRU", "lstm": "LSTM", "helm": "HELM"}  # parts of derived names such as gru-stack4
 STEPS_LABEL = "Environment steps (millions)"
 BAND_ALPHA = 0.2
+RANGE_PAD = 0.03  # a fixed range is padded by this fraction, so that a curve at 0 or 1 stays visible
+CHANCE_STYLE = {"color": "0.3", "linestyle": "--", "linewidth": 1.0, "zorder": 1.5}
+CHANCE_LABEL = "chance"
+TITLE_WIDTH = 52  # characters per line of a curves panel's title (4.6 inches wide)
+FINAL_TITLE_WIDTH = 40  # and of a final-performance panel's (4.2 inches, with the method labels beside it)
 
 
 def method_colors(methods: Iterable[str]) -> dict[str, str]:
@@ -72,6 +100,62 @@ def method_colors(methods: Iterable[str]) -> dict[str, str]:
         **{method: METHOD_COLORS[method] for method in known},
         **{method: SPARE_COLORS[i % len(SPARE_COLORS)] for i, method in enumerate(unknown)},
     }
+
+
+def method_label(method: str) -> str:
+    """The readable name of a method: :data:`METHOD_LABELS`; a derived name (``gru-stack4``, ``lstm-helm``) joins
+    the names of its parts (``GRU + 4-Stack``); any other name is shown as it is."""
+    if method in METHOD_LABELS:
+        return METHOD_LABELS[method]
+    parts = method.split("-")
+    labels = []
+    for part in parts:
+        if part in PART_LABELS:
+            labels.append(PART_LABELS[part])
+        elif part.startswith("stack") and part[5:].isdigit():
+            labels.append(f"{int(part[5:])}-Stack")
+        else:
+            return method
+    return " + ".join(labels)
+
+
+def task_title(env_id: str, options: Mapping[str, Any] | None, task: str = "") -> str:
+    """A task's title: its environment id and non-default reset options (``MortarMayhem-Grid-v0, command_count=1``);
+    with unknown options (None), the id and the task's name where it differs (``MortarMayhem-Grid-v0 (mm_grid_1)``)."""
+    if options is None:
+        return env_id if task in ("", env_id) else f"{env_id} ({task})"
+    shown = []
+    for key in sorted(options):
+        value = options[key]
+        if isinstance(value, list) and len(value) == 1:
+            value = value[0]  # an option list with one entry is that value (command_count: [1])
+        shown.append(f"{key}={json.dumps(value)}")
+    return ", ".join([env_id, *shown])
+
+
+def metric_range(env_id: str, column: str = "metric") -> tuple[float | None, float | None]:
+    """The (low, high) range of a column of the paper's metric (``metric``, ``metric_reference``) from the metric
+    table; (None, None) for other columns and ids without a metric."""
+    if column in ("metric", "metric_reference") and env_id in METRICS:
+        return METRICS[env_id].low, METRICS[env_id].high
+    return None, None
+
+
+def chance_level(env_id: str, options: Mapping[str, Any] | None, column: str = "metric") -> float | None:
+    """The chance level of ``column`` for a task, from the metric table with the env's resolved options (``options``:
+    the non-default ones, None if unknown); None for other columns (``metric_reference`` counts differently) and
+    where it is unknown."""
+    if column != "metric" or env_id not in METRICS:
+        return None
+    resolved = None
+    if options is not None:
+        from agents.config import resolved_options
+
+        try:
+            resolved = resolved_options(env_id, options)
+        except ValueError:  # options of another version of the environment
+            resolved = None
+    return metric_of(env_id).chance_level(resolved)
 
 
 def _complete(colors: dict[str, str] | None, methods: Iterable[str]) -> dict[str, str]:
@@ -109,7 +193,38 @@ def _env_ids(*tables: results.Records | None) -> dict[str, str]:
     return found
 
 
-def _draw_curves(axes: Axes, rows: Sequence[dict[str, Any]], colors: dict[str, str]) -> None:
+def _titles(env_ids: Mapping[str, str], options: Mapping[str, Any]) -> dict[str, str]:
+    """task -> title; tasks whose titles would coincide (the same options under two names) add their name."""
+    titles = {task: task_title(env_id, options.get(task), task) for task, env_id in env_ids.items()}
+    for task, title in titles.items():
+        if list(titles.values()).count(title) > 1:
+            titles[task] = f"{title} [{task}]"
+    return titles
+
+
+def _fix_range(axes: Axes, low: float | None, high: float | None, axis: str = "y") -> None:
+    """Limit one axis to a metric's range, padded by :data:`RANGE_PAD` (an open end keeps the data's limit)."""
+    get, set_ = (axes.get_ylim, axes.set_ylim) if axis == "y" else (axes.get_xlim, axes.set_xlim)
+    if low is None and high is None:
+        return
+    current = get()
+    bottom = current[0] if low is None else low
+    top = current[1] if high is None else high
+    pad = RANGE_PAD * ((top - bottom) or 1.0)
+    set_(bottom - pad if low is not None else bottom, top + pad if high is not None else top)
+
+
+def _draw_chance(axes: Axes, chance: float | None, axis: str = "y") -> bool:
+    if chance is None:
+        return False
+    line = axes.axhline(chance, **CHANCE_STYLE) if axis == "y" else axes.axvline(chance, **CHANCE_STYLE)
+    line.set_label(CHANCE_LABEL)
+    line.set_gid(CHANCE_LABEL)  # tests and scripts find the line by it
+    return True
+
+
+def _draw_curves(axes: Axes, rows: Sequence[dict[str, Any]], colors: dict[str, str]) -> set[str]:
+    """IQM lines and interval bands per method; returns the methods drawn."""
     present = {row["method"] for row in rows}
     for method in (method for method in colors if method in present):
         mine = sorted((row for row in rows if row["method"] == method), key=lambda row: row["step"])
@@ -121,6 +236,7 @@ def _draw_curves(axes: Axes, rows: Sequence[dict[str, Any]], colors: dict[str, s
     if not rows:
         axes.text(0.5, 0.5, "no data", transform=axes.transAxes, ha="center", va="center", color="grey")
     axes.grid(alpha=0.3)
+    return present
 
 
 def curves_figure(
@@ -133,18 +249,30 @@ def curves_figure(
     confidence: float = 0.95,
     seed: int = 0,
     points: int = 100,
+    zoom: bool = False,
+    options: Mapping[str, Mapping[str, Any] | None] | None = None,
 ) -> Figure:
     """Sample-efficiency curves, one row of panels per task: the training-seed ``training_column`` (left, when
     ``training`` is given; lightly smoothed, :func:`agents.results.training_curves`) beside the novel-seed ``column``
-    (IQM and interval across runs at every checkpoint the runs share)."""
+    (IQM and interval across runs at every checkpoint the runs share).
+
+    A metric's axis spans its whole range unless ``zoom``; a dashed line marks the chance level where known.
+    ``options``: task -> non-default env options (default: :func:`agents.results.task_options` of the records).
+    The legend lists the methods drawn; methods drawn in no panel are named in a :class:`ResultsWarning`."""
     env_ids = _env_ids(episodes, training)
     tasks = sorted(env_ids)
+    options = results.task_options(episodes) if options is None else options
+    titles = _titles(env_ids, options)
     methods = set(episodes["method"].tolist()) | (set(training["method"].tolist()) if training is not None else set())
     colors = _complete(colors, methods)
     columns = 2 if training is not None else 1
     figure = _new_figure(4.6 * columns, 3.0 * len(tasks) + 0.6)
     panels = figure.subplots(len(tasks), columns, squeeze=False)
+    drawn: set[str] = set()
+    chance_drawn = False
     for row, task in enumerate(tasks):
+        env_id = env_ids[task]
+        title = textwrap.fill(titles[task], TITLE_WIDTH)
         novel = panels[row, -1]
         of_task = episodes.where(task=task)
         rows = (
@@ -152,9 +280,12 @@ def curves_figure(
             if len(of_task)
             else []
         )
-        _draw_curves(novel, rows, colors)
-        novel.set_title(f"{task}: novel seeds", fontsize=10)
-        novel.set_ylabel(metric_label(env_ids[task], column))
+        drawn |= _draw_curves(novel, rows, colors)
+        chance_drawn |= _draw_chance(novel, chance_level(env_id, options.get(task), column))
+        if not zoom:
+            _fix_range(novel, *metric_range(env_id, column))
+        novel.set_title(f"{title}: novel seeds", fontsize=10)
+        novel.set_ylabel(metric_label(env_id, column))
         if training is not None:
             left = panels[row, 0]
             curves = results.training_curves(training.where(task=task), column=training_column, points=points)
@@ -163,23 +294,37 @@ def curves_figure(
                 for (_, curve_task), scores in curves.items()
                 for estimate in results.estimate(scores, curve_task, reps=reps, confidence=confidence, seed=seed)
             ]
-            _draw_curves(left, rows, colors)
-            left.set_title(f"{task}: training seeds", fontsize=10)
-            left.set_ylabel(training_column.replace("_", " ").capitalize())
+            drawn |= _draw_curves(left, rows, colors)
+            chance_drawn |= _draw_chance(left, chance_level(env_id, options.get(task), training_column))
+            if not zoom:
+                _fix_range(left, *metric_range(env_id, training_column))
+            left.set_title(f"{title}: training seeds", fontsize=10)
+            left.set_ylabel(metric_label(env_id, training_column))
         for axes in panels[row]:
             axes.set_xlabel(STEPS_LABEL if row == len(tasks) - 1 else "")
-    _legend(figure, colors, confidence)
+    missing = [method for method in colors if method in methods and method not in drawn]
+    if missing:
+        named = ", ".join(f"{method!r} ({method_label(method)})" for method in missing)
+        warnings.warn(
+            f"curves: method(s) {named} drawn in no panel (their runs share no checkpoint step, or their scores are "
+            "empty): left out of the figure and its legend",
+            results.ResultsWarning,
+            stacklevel=2,
+        )
+    _legend(figure, {method: color for method, color in colors.items() if method in drawn}, confidence, chance_drawn)
     return figure
 
 
-def _legend(figure: Figure, colors: dict[str, str], confidence: float = 0.95) -> None:
+def _legend(figure: Figure, colors: dict[str, str], confidence: float = 0.95, chance: bool = False) -> None:
     from matplotlib.lines import Line2D
 
-    handles = [Line2D([], [], color=color, linewidth=2, label=method) for method, color in colors.items()]
+    handles = [Line2D([], [], color=color, linewidth=2, label=method_label(method)) for method, color in colors.items()]
+    if chance:
+        handles.append(Line2D([], [], **CHANCE_STYLE, label=CHANCE_LABEL))
     figure.legend(
         handles=handles,
         loc="outside upper center",
-        ncols=min(len(handles), 7),
+        ncols=max(1, min(len(handles), 7)),
         frameon=False,
         title=f"IQM across runs, {confidence:.0%} stratified-bootstrap CI",
         title_fontsize=9,
@@ -193,11 +338,16 @@ def final_figure(
     reps: int = 2000,
     confidence: float = 0.95,
     seed: int = 0,
+    zoom: bool = False,
+    options: Mapping[str, Mapping[str, Any] | None] | None = None,
 ) -> Figure:
     """Final performance, one panel per task: per method, the IQM (black tick) and interval (bar) across runs at each
-    run's last checkpoint."""
+    run's last checkpoint. A metric's axis spans its whole range unless ``zoom`` (then it is fitted to the
+    intervals); a dashed line marks the chance level where known (``options`` as in :func:`curves_figure`)."""
     env_ids = _env_ids(episodes)
     tasks = sorted(env_ids)
+    options = results.task_options(episodes) if options is None else options
+    titles = _titles(env_ids, options)
     colors = _complete(colors, episodes["method"].tolist())
     rows = results.aggregate(episodes, column, steps="last", reps=reps, confidence=confidence, seed=seed, overall=False)
     columns = min(3, len(tasks))
@@ -209,6 +359,7 @@ def final_figure(
     for axes in panels.flat[len(tasks) :]:
         axes.set_visible(False)
     for axes, task in zip(panels.flat, tasks, strict=False):
+        env_id = env_ids[task]
         mine = {row["method"]: row for row in rows if row["task"] == task}
         for y, method in enumerate(methods):
             if method not in mine:
@@ -217,18 +368,24 @@ def final_figure(
             width = max(row["high"] - row["low"], 1e-9)
             axes.barh(y, width, left=row["low"], height=0.6, color=colors[method], alpha=0.75)
             axes.vlines(row["iqm"], y - 0.3, y + 0.3, color="black", linewidth=2)
-        axes.set_yticks(range(len(methods)), methods)
+        axes.set_yticks(range(len(methods)), [method_label(method) for method in methods])
+        chance = chance_level(env_id, options.get(task), column)
+        _draw_chance(axes, chance, axis="x")
         if mine:  # bars pin the x limits at their ends (sticky edges), so margins would not show an interval at 0 or 1
             low = min(row["low"] for row in mine.values())
             high = max(row["high"] for row in mine.values())
+            if chance is not None:
+                low, high = min(low, chance), max(high, chance)
             pad = 0.08 * ((high - low) or max(abs(high), 1.0))
             axes.set_xlim(low - pad, high + pad)
+        if not zoom:
+            _fix_range(axes, *metric_range(env_id, column), axis="x")
         axes.set_ylim(-0.6, len(methods) - 0.4)
         axes.invert_yaxis()
-        axes.set_xlabel(metric_label(env_ids[task], column))
+        axes.set_xlabel(metric_label(env_id, column))
         steps = sorted({row["step"] for row in mine.values()})
         at = f"{steps[0] / 1e6:.3g}M steps" if len(steps) == 1 else "each run's last checkpoint"
-        axes.set_title(f"{task} ({at})", fontsize=10)
+        axes.set_title(textwrap.fill(f"{titles[task]} ({at})", FINAL_TITLE_WIDTH), fontsize=10)
         axes.grid(axis="x", alpha=0.3)
     separator = "\n" if columns == 1 else " "  # one panel is too narrow for the title on one line
     title = f"Final performance:{separator}IQM across runs, {confidence:.0%} stratified-bootstrap CI"
@@ -259,10 +416,12 @@ def plot_results(
     reps: int = 2000,
     confidence: float = 0.95,
     seed: int = 0,
+    zoom: bool = False,
 ) -> list[Path]:
     """Read results directories and write ``curves.png/.pdf`` and ``final.png/.pdf`` into ``out``; returns the paths.
 
-    Both figures share one colour per method.
+    Both figures share one colour per method. A metric's axis spans its whole range unless ``zoom``. The tasks'
+    options (titles, chance levels) come from the records or, for older records, the runs' saved configs.
     """
     loaded = results.read_results(*directories)
     if column not in loaded.episodes:
@@ -273,8 +432,9 @@ def plot_results(
     if loaded.training is not None:
         methods |= set(loaded.training["method"].tolist())
     colors = method_colors(methods)
-    options = {"reps": reps, "confidence": confidence, "seed": seed}
+    options = results.task_options(loaded.episodes, directories)
+    shared = {"reps": reps, "confidence": confidence, "seed": seed, "zoom": zoom, "options": options}
     out = Path(out)
-    curves = curves_figure(loaded.episodes, loaded.training, column, training_column, colors, **options)
-    final = final_figure(loaded.episodes, column, colors, **options)
+    curves = curves_figure(loaded.episodes, loaded.training, column, training_column, colors, **shared)
+    final = final_figure(loaded.episodes, column, colors, **shared)
     return save_figure(curves, out / "curves") + save_figure(final, out / "final")

@@ -3,7 +3,9 @@
 Reads every directory's ``episodes.csv`` (and ``training.csv`` where present) and writes, as PNG and PDF, the
 sample-efficiency curves (``curves``: training-seed return beside the novel-seed metric, one row per task) and the
 final performance (``final``: each run's last checkpoint), both as the IQM across runs with a 95% stratified-bootstrap
-interval; prints the final-performance table.
+interval; prints the final-performance table. A metric with a known range (success, commands executed: [0, 1]) is
+shown on that whole range, with a dashed line at the task's chance level where it is known; ``--zoom`` fits the axes
+to the data instead.
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--training-column", default="return", help="training.csv column (default: return)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap replicates (default: 2000)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default: 0)")
+    parser.add_argument(
+        "--zoom", action="store_true", help="fit the metric's axis to the data instead of its whole range (e.g. [0, 1])"
+    )
     args = parser.parse_args(argv)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", results.ResultsWarning)
@@ -37,6 +42,7 @@ def main(argv: list[str] | None = None) -> int:
                 training_column=args.training_column,
                 reps=args.reps,
                 seed=args.seed,
+                zoom=args.zoom,
             )
             final = results.aggregate(
                 results.read_episodes(*args.results), args.column, steps="last", reps=args.reps, seed=args.seed

@@ -82,3 +82,12 @@ def test_usage_errors() -> None:
         plot.main(["--out", "x"])  # no results directory
     with pytest.raises(SystemExit):
         plot.main(["somewhere"])  # no --out
+
+
+def test_zoom_fits_the_metric_axis_to_the_data(tmp_path: Path) -> None:
+    directory = write_results(tmp_path / "a", methods=("ppo",), training=False)  # PPO's scores stay below 0.6
+    for name, flags in (("fixed", []), ("zoomed", ["--zoom"])):
+        assert plot.main([str(directory), "--out", str(tmp_path / name), "--reps", "50", *flags]) == 0
+        assert_readable(tmp_path / name)
+    for figure in ("curves.png", "final.png"):
+        assert (tmp_path / "fixed" / figure).read_bytes() != (tmp_path / "zoomed" / figure).read_bytes(), figure
