@@ -1,4 +1,5 @@
-"""Writing results and saying where they came from: atomic writes, git revision, versions, machine.
+"""Writing results and saying where they came from: atomic writes, git revision, versions, machine, and where a
+result table may be written (:class:`ResultFile`).
 
 Everything that writes a checkpoint, a record or a figure goes through :func:`atomic_write_bytes`, so a reader sees
 the old file or the complete new one, never a half-written file. Standard library only at import time (numpy,
@@ -8,6 +9,7 @@ use it from memory-gym's isolated environment.
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import importlib.metadata
 import json
@@ -16,10 +18,14 @@ import platform
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
+COMMITTED_RESULTS = ROOT / "results"  # committed result tables: replaced only where --out names them
+SCRATCH = ROOT / "runs"  # git-ignored: where result tables go by default
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
@@ -52,9 +58,14 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode())
 
 
+def json_text(data: Any, sort_keys: bool = True) -> str:
+    """``data`` as indented JSON with a final newline: the form of every JSON file the project writes."""
+    return json.dumps(data, indent=2, sort_keys=sort_keys) + "\n"
+
+
 def write_json_atomic(path: str | Path, data: Any, sort_keys: bool = True) -> None:
     """``data`` as indented JSON; serialised before the file is touched, so a failure leaves no trace."""
-    atomic_write_text(path, json.dumps(data, indent=2, sort_keys=sort_keys) + "\n")
+    atomic_write_text(path, json_text(data, sort_keys))
 
 
 def git_revision() -> dict[str, Any]:
@@ -112,3 +123,117 @@ def provenance() -> dict[str, Any]:
 
 def now() -> str:
     return datetime.datetime.now().astimezone().isoformat(timespec="seconds")
+
+
+# ----------------------------------------------------------------------------------------------- result tables
+class OutputRefused(ValueError):
+    """A result table may not be written where it was asked to go (see :class:`ResultFile`)."""
+
+
+@dataclass(frozen=True)
+class ResultFile:
+    """Where a script writes a result table (a benchmark, the parity report, a chart of them), and the rule that keeps
+    the committed tables whole:
+
+    * without ``--out`` a table goes to its default under ``runs/`` (git-ignored); an existing file under
+      ``results/`` is replaced only when ``--out`` names it;
+    * a partial run (``partial`` says why, e.g. ``--quick, 1 of 10 ids``; empty for a full run) never replaces a file
+      that holds a full table (``holds_full(path)``), whoever named it.
+
+    Scripts check before they measure (:meth:`for_command`: a refusal costs nothing) and write through :meth:`save`
+    / :meth:`save_json`, which check again; what is refused then is kept under ``runs/refused/``, not lost."""
+
+    path: Path
+    explicit: bool
+    holds_full: Callable[[Path], bool]
+    committed: Path = COMMITTED_RESULTS
+    scratch: Path = SCRATCH
+
+    @classmethod
+    def choose(cls, out: str | Path | None, default: Path, holds_full: Callable[[Path], bool]) -> ResultFile:
+        """The file ``--out`` names (``out``), else ``default`` (a path under ``runs/``)."""
+        return cls(Path(out) if out is not None else Path(default), out is not None, holds_full)
+
+    @classmethod
+    def for_command(
+        cls,
+        parser: argparse.ArgumentParser,
+        out: str | Path | None,
+        default: Path,
+        holds_full: Callable[[Path], bool],
+        partial: str,
+    ) -> ResultFile:
+        """:meth:`choose` and :meth:`check` for a script, before it measures: a refusal costs nothing and ends the
+        script through ``parser.error`` (exit status 2)."""
+        target = cls.choose(out, default, holds_full)
+        try:
+            target.check(partial)
+        except OutputRefused as err:
+            parser.error(str(err))
+        return target
+
+    def check(self, partial: str) -> None:
+        """:class:`OutputRefused`, with what to do instead, when this run may not replace the file."""
+        if not self.path.exists():
+            return
+        if not self.explicit and self.path.resolve().is_relative_to(self.committed.resolve()):
+            raise OutputRefused(f"{self.path} is a committed result: it is replaced only where --out names it")
+        if partial and self.holds_full(self.path):
+            raise OutputRefused(
+                f"{self.path} holds a full table and this run is partial ({partial}): a partial run never replaces "
+                "a full table; write it elsewhere with --out PATH"
+            )
+
+    def write_bytes(self, data: bytes, partial: str) -> Path:
+        """Write ``data`` atomically after :meth:`check`; a refused output goes to ``runs/refused/`` and the error
+        says where."""
+        try:
+            self.check(partial)
+        except OutputRefused as err:
+            stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+            kept = self.scratch / "refused" / f"{stamp}-{self.path.name}"
+            atomic_write_bytes(kept, data)
+            raise OutputRefused(f"{err} (this run's output is kept in {kept})") from None
+        atomic_write_bytes(self.path, data)
+        return self.path
+
+    def save(self, data: bytes, partial: str) -> Path:
+        """:meth:`write_bytes` for a script: a refusal ends it with the message (exit status 1); says where the file
+        went."""
+        try:
+            self.write_bytes(data, partial)
+        except OutputRefused as err:
+            raise SystemExit(f"error: {err}") from None
+        print(f"wrote {self.path}")
+        return self.path
+
+    def save_json(self, record: Any, partial: str, sort_keys: bool = True) -> Path:
+        return self.save(json_text(record, sort_keys).encode(), partial)
+
+
+def add_out_argument(parser: argparse.ArgumentParser, default: Path, what: str = "the table") -> None:
+    """The ``--out`` option of a script that writes a result table through :meth:`ResultFile.choose`."""
+    parser.add_argument(
+        "--out",
+        type=Path,
+        help=f"{what}'s file (default {repo_relative(default)}); a file under results/ only when named here",
+    )
+
+
+def repo_relative(path: Path) -> Path:
+    """``path`` relative to the repository when it is inside it (how help texts show default paths)."""
+    return path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+
+
+def json_table(partial_of: Callable[[dict], str]) -> Callable[[Path], bool]:
+    """``holds_full`` of :class:`ResultFile` for a JSON table: the file is a mapping that ``partial_of`` (the reasons
+    a record is partial, empty when it is full) finds full. A file that is not such a table holds none."""
+
+    def holds_full(path: Path) -> bool:
+        try:
+            record = json.loads(Path(path).read_text())
+            return isinstance(record, dict) and not partial_of(record)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):  # unreadable, or another kind of file
+            return False
+
+    return holds_full

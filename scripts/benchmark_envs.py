@@ -17,11 +17,14 @@ reference memory-gym==1.0.2, side by side in one run.
 
 Each measurement is repeated ``--repeats`` times, ours and the reference's (a) interleaved, and the best run is
 kept on both sides: the machine is shared, and the best run is the one least disturbed by other load.
-Ratios: ours/reference for (a), and (b, 64 slots)/reference (a) and (c)/reference (a). Results go to
-``results/benchmarks/envs.json``.
+Ratios: ours/reference for (a), and (b, 64 slots)/reference (a) and (c)/reference (a).
 
-    python scripts/benchmark_envs.py                       # everything (several minutes with the reference)
-    python scripts/benchmark_envs.py --ids MortarMayhem-v0 --quick --no-reference
+The report goes to ``runs/benchmarks/envs.json`` (git-ignored) unless ``--out`` names another file; the committed
+table is replaced only where ``--out`` names it, and a partial run (``--quick``, some of the ids, or no memory-gym
+column) never replaces a full table, wherever it is:
+
+    python scripts/benchmark_envs.py --repeats 3 --out results/benchmarks/envs.json   # the committed table
+    python scripts/benchmark_envs.py --ids MortarMayhem-v0 --quick --no-reference     # a smoke run, into runs/
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -38,12 +42,30 @@ sys.path.insert(0, str(ROOT))
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
-from agents.io import provenance, write_json_atomic  # noqa: E402
+from agents.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
 from envs import make_core  # noqa: E402
 from scripts.reference import REFERENCE_IDS  # noqa: E402  (the ids measured: those memory-gym has)
 from scripts.reference.protocol import time_constant_action_episodes  # noqa: E402
 
 SLOT_COUNTS = (16, 64)
+DEFAULT_OUT = SCRATCH / "benchmarks" / "envs.json"
+
+
+def partial_reasons(quick: bool, ids: Iterable[str], no_reference: str) -> str:
+    """Why a run is not a full table (every id, not ``--quick``, the memory-gym column), empty when it is one;
+    ``no_reference`` says why the memory-gym column is missing (empty when it is there)."""
+    measured = set(ids) & set(REFERENCE_IDS)
+    reasons = ["--quick"] if quick else []
+    if len(measured) < len(REFERENCE_IDS):
+        reasons.append(f"{len(measured)} of {len(REFERENCE_IDS)} ids")
+    return ", ".join([*reasons, no_reference] if no_reference else reasons)
+
+
+def report_partial(report: dict[str, Any]) -> str:
+    """:func:`partial_reasons` of a written report."""
+    rows = report["results"]
+    reference = all(row["reference_single_steps_per_s"] for row in rows.values())
+    return partial_reasons(report["protocol"]["quick"], rows, "" if reference else "no memory-gym column")
 
 
 def noop_action(space: gym.Space) -> Any:
@@ -117,18 +139,22 @@ def reference_single(env_id: str, episodes: int) -> float | None:
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--ids", nargs="+", default=REFERENCE_IDS, choices=REFERENCE_IDS, metavar="ID")
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(
+        "--ids", nargs="+", default=REFERENCE_IDS, choices=REFERENCE_IDS, metavar="ID", help="default: every id"
+    )
     parser.add_argument("--episodes", type=int, default=100, help="(a): episodes per id")
     parser.add_argument("--max-total-steps", type=int, default=100_000, help="(a): cap on the steps of one run")
     parser.add_argument("--batched-steps", type=int, default=64_000, help="(b): slot-steps per measurement")
     parser.add_argument("--repeats", type=int, default=3, help="runs per measurement; the best is kept")
     parser.add_argument("--quick", action="store_true", help="smoke run: 3 episodes, 1024 slot-steps, 1 repeat")
     parser.add_argument("--no-reference", action="store_true", help="do not run the reference package")
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks" / "envs.json")
+    add_out_argument(parser, DEFAULT_OUT, "the report")
     args = parser.parse_args(argv)
     if args.quick:
         args.episodes, args.batched_steps, args.repeats = 3, 1024, 1
+    partial = partial_reasons(args.quick, args.ids, _missing_reference(args.no_reference))
+    target = ResultFile.for_command(parser, args.out, DEFAULT_OUT, json_table(report_partial), partial)
 
     rows: dict[str, Any] = {}
     header = (
@@ -194,8 +220,19 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         },
         "results": rows,
     }
-    write_json_atomic(args.out, report)
+    target.save_json(report, report_partial(report))
     return report
+
+
+def _missing_reference(no_reference: bool) -> str:
+    """Why this run will have no memory-gym column (empty when it will)."""
+    from scripts.reference.venv import reference_python, reference_venv_path
+
+    if no_reference:
+        return "--no-reference"
+    if reference_python() is None:
+        return f"no memory-gym column: no reference venv at {reference_venv_path()}"
+    return ""
 
 
 if __name__ == "__main__":

@@ -5,8 +5,10 @@
 For every size, a ``lm="random"`` branch (84x84x3 observations) is stepped ``--steps`` times per round after a
 warm-up that fills the memory; the per-step time of :meth:`HelmBranch.step` and of its parts (projection,
 retrieval, transformer = the rest) is reported as the best and the median round (the machine may be shared).
-Random weights cost what pretrained weights of the same shape cost. Prints a table and writes
-``results/benchmarks/helm.json`` atomically (with versions, git revision, machine).
+Random weights cost what pretrained weights of the same shape cost. Prints a table and writes the record atomically
+(with versions, git revision, machine) to ``runs/benchmarks/helm.json`` (git-ignored) unless ``--out`` names another
+file; a file under ``results/`` is replaced only where ``--out`` names it, and a run of fewer than the default sizes
+never replaces a record of all of them.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -24,7 +27,7 @@ sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 import torch  # noqa: E402
 
 from agents.helm import HelmBranch  # noqa: E402
-from agents.io import provenance, write_json_atomic  # noqa: E402
+from agents.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
 
 # name: (layers, width, heads, vocab, mem_len)
 SIZES = {
@@ -34,6 +37,14 @@ SIZES = {
     "gpt2-small": (12, 768, 12, 50257, 128),
     "pythia-410m": (24, 1024, 16, 50304, 128),
 }
+DEFAULT_SIZES = ("small", "small4", "gpt2-small")  # the full table
+DEFAULT_OUT = SCRATCH / "benchmarks" / "helm.json"
+
+
+def partial_reasons(sizes: Iterable[str]) -> str:
+    """Why a run is not a full table (every default size), empty when it is one."""
+    measured = set(sizes) & set(DEFAULT_SIZES)
+    return "" if len(measured) == len(DEFAULT_SIZES) else f"{len(measured)} of the {len(DEFAULT_SIZES)} default sizes"
 
 
 def _per_step(fn, steps: int) -> float:
@@ -74,9 +85,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--batch", type=int, default=16)
     parser.add_argument("--steps", type=int, default=50)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--sizes", nargs="+", default=["small", "small4", "gpt2-small"], choices=sorted(SIZES))
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks" / "helm.json")
+    parser.add_argument("--sizes", nargs="+", default=list(DEFAULT_SIZES), choices=sorted(SIZES))
+    add_out_argument(parser, DEFAULT_OUT, "the record")
     args = parser.parse_args(argv)
+    holds_full = json_table(lambda record: partial_reasons(record["results"]))
+    target = ResultFile.for_command(parser, args.out, DEFAULT_OUT, holds_full, partial_reasons(args.sizes))
     rows = {}
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, batch {args.batch}, load {os.getloadavg()}")
     print(
@@ -103,8 +116,8 @@ def main(argv: list[str] | None = None) -> None:
             "rounds_ms": {key: [t * 1e3 for t in values] for key, values in times.items()},
         }
     setting = {"batch": args.batch, "steps": args.steps, "repeats": args.repeats, "threads": torch.get_num_threads()}
-    write_json_atomic(args.out, {"setting": setting, "results": rows, **provenance()}, sort_keys=False)
-    print(f"wrote {args.out}")
+    record = {"setting": setting, "results": rows, **provenance()}
+    target.save_json(record, partial_reasons(rows), sort_keys=False)
 
 
 if __name__ == "__main__":

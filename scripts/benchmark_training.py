@@ -17,7 +17,10 @@
 
 Methods are measured in turns (``--repeats`` rounds) and reported as medians and as the best round of each (the
 least disturbed one), because the machine may be shared; every round records the load average.
-Prints a table and writes ``results/benchmarks/training.json`` atomically (with versions, git revision, machine).
+Prints a table and writes the record atomically (with versions, git revision, machine) to
+``runs/benchmarks/training.json`` (git-ignored) unless ``--out`` names another file. The committed table is replaced
+only where ``--out`` names it (``--out results/benchmarks/training.json``), and a partial run (some of the methods,
+or no SB3 measurement) never replaces a full table, wherever it is.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
@@ -40,7 +44,7 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 from agents.config import Config, load_config  # noqa: E402
-from agents.io import provenance, write_json_atomic  # noqa: E402
+from agents.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
 from agents.models import log_probs_and_entropy  # noqa: E402
 from agents.ppo import filled_index  # noqa: E402
 from agents.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
@@ -49,6 +53,21 @@ from agents.trainer import Trainer  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"
 METHODS = ("gru", "ppo", "stack4", "stack16", "helm")
+DEFAULT_OUT = SCRATCH / "benchmarks" / "training.json"
+
+
+def partial_reasons(methods: Iterable[str], no_sb3: str) -> str:
+    """Why a run is not a full table (every method and SB3's RecurrentPPO), empty when it is one; ``no_sb3`` says
+    why SB3 is missing (empty when it is measured)."""
+    measured = set(methods) & set(METHODS)
+    reasons = [] if len(measured) == len(METHODS) else [f"{len(measured)} of {len(METHODS)} methods"]
+    return ", ".join([*reasons, no_sb3] if no_sb3 else reasons)
+
+
+def record_partial(record: dict) -> str:
+    """:func:`partial_reasons` of a written record."""
+    sb3 = record["summary"]["median"]["sb3_recurrent_ppo_steps_per_s"] is not None
+    return partial_reasons(record["setting"]["methods"], "" if sb3 else "no SB3 RecurrentPPO")
 
 
 def benchmark_config(args: argparse.Namespace, method: str = "gru") -> Config:
@@ -211,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--helm-lm", default="random", help="model.helm.lm of the HELM run (default: random)")
     parser.add_argument("--sb3", choices=["auto", "yes", "no"], default="auto", help="include SB3 RecurrentPPO")
     parser.add_argument("--child", choices=METHODS, help=argparse.SUPPRESS)  # one measurement, printed as JSON
-    parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks" / "training.json"))
+    add_out_argument(parser, DEFAULT_OUT, "the record")
     args = parser.parse_args(argv)
     argv = list(sys.argv[1:] if argv is None else argv)
     if args.child:
@@ -226,6 +245,12 @@ def main(argv: list[str] | None = None) -> int:
         for name in ("env", "workers", "worker_steps", "epochs", "minibatches", "updates", "precision", "threads")
     ] + [f"--helm-lm={args.helm_lm}"]
     use_sb3 = args.sb3 == "yes" or (args.sb3 == "auto" and sb3_available())
+    no_sb3 = (
+        "" if use_sb3 else ("--sb3 no" if args.sb3 == "no" else "no SB3 RecurrentPPO: sb3_contrib is not installed")
+    )
+    target = ResultFile.for_command(
+        parser, args.out, DEFAULT_OUT, json_table(record_partial), partial_reasons(methods, no_sb3)
+    )
     sb3 = make_sb3(args) if use_sb3 else None
     if sb3 is not None:
         sb3_throughput(sb3, argparse.Namespace(**{**vars(args), "updates": 1}))  # warm-up
@@ -288,8 +313,7 @@ def main(argv: list[str] | None = None) -> int:
 
         record["versions"]["sb3_contrib"] = sb3_contrib.__version__
         record["setting"]["sb3_network"] = "RecurrentPPO default for the observation space (LSTM 256, actor/critic)"
-    out = Path(args.out)
-    write_json_atomic(out, record, sort_keys=False)
+    target.save_json(record, record_partial(record), sort_keys=False)
 
     print(
         f"\n{'method':10s}{'steps/s':>10s}{'best':>10s}{'/ PPO':>8s}{'/ GRU':>8s}"
@@ -306,7 +330,6 @@ def main(argv: list[str] | None = None) -> int:
         )
     if summary["median"]["sb3_recurrent_ppo_steps_per_s"]:  # type: ignore[index]
         print(f"SB3 RecurrentPPO {summary['median']['sb3_recurrent_ppo_steps_per_s']:.0f} steps/s")  # type: ignore[index]
-    print(f"wrote {out}")
     return 0
 
 

@@ -1,30 +1,48 @@
 """Replay all reference traces and report the share of identical steps per id.
 
-Usage: python scripts/parity_report.py [--out results/parity.json]
+    python scripts/parity_report.py --out results/parity.json        # the committed report
+    python scripts/parity_report.py --ids MortarMayhem-v0            # one id, into runs/parity.json
 
-Command line of ``scripts.reference.parity`` (replays through ``gymnasium.make`` and in one batched core).
+Command line of ``scripts.reference.parity`` (replays through ``gymnasium.make`` and in one batched core). The report
+goes to ``runs/parity.json`` (git-ignored) unless ``--out`` names another file; the committed report is replaced only
+where ``--out`` names it, and a report of some of the ids never replaces one of all of them.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from agents.io import write_json_atomic  # noqa: E402
+from agents.io import SCRATCH, ResultFile, add_out_argument, json_table  # noqa: E402
 from scripts.reference import REFERENCE_IDS  # noqa: E402
 from scripts.reference.parity import replay, replay_batched  # noqa: E402
 
+DEFAULT_OUT = SCRATCH / "parity.json"
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "parity.json")
-    args = parser.parse_args()
+
+def partial_reasons(ids: Iterable[str]) -> str:
+    """Why a report is not a full one (every id), empty when it is one."""
+    replayed = set(ids) & set(REFERENCE_IDS)
+    return "" if len(replayed) == len(REFERENCE_IDS) else f"{len(replayed)} of {len(REFERENCE_IDS)} ids"
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(
+        "--ids", nargs="+", default=REFERENCE_IDS, choices=REFERENCE_IDS, metavar="ID", help="default: every id"
+    )
+    add_out_argument(parser, DEFAULT_OUT, "the report")
+    args = parser.parse_args(argv)
+    target = ResultFile.for_command(
+        parser, args.out, DEFAULT_OUT, json_table(partial_reasons), partial_reasons(args.ids)
+    )
     report = {}
-    for env_id in REFERENCE_IDS:
+    for env_id in args.ids:
         report[env_id] = {}
         for face, result in (("single", replay(env_id)), ("batched", replay_batched(env_id))):
             report[env_id][face] = {
@@ -39,7 +57,8 @@ def main() -> None:
             )
             for line in result.mismatches[:3]:
                 print("    ", line[:300])
-    write_json_atomic(args.out, report)
+    target.save_json(report, partial_reasons(report))
+    return report
 
 
 if __name__ == "__main__":

@@ -1,7 +1,13 @@
-"""Bar chart of results/benchmarks/envs.json: steps/s of the reference (one env) and ours (one env, 16 and 64 slots,
-make_vec with 64 slots).
+"""Bar chart of an environment benchmark (scripts/benchmark_envs.py's JSON): steps/s of the reference (one env) and
+ours (one env, 16 and 64 slots, make_vec with 64 slots).
 
-Usage: python scripts/plot_benchmarks.py [--json results/benchmarks/envs.json] [--out results/benchmarks/envs.png]
+    python scripts/plot_benchmarks.py                      # runs/benchmarks/envs.json -> runs/benchmarks/envs.png
+    python scripts/plot_benchmarks.py --json results/benchmarks/envs.json --out results/benchmarks/envs.png
+
+The chart goes to ``runs/benchmarks/envs.png`` (git-ignored) unless ``--out`` names another file; the committed chart
+is replaced only where ``--out`` names it, and the chart of a partial benchmark (``--quick``, some of the ids, no
+memory-gym column) never replaces the chart of a full one. The PNG says which it is in its ``Memory Gym benchmark``
+text chunk (a chart without one counts as full).
 """
 
 from __future__ import annotations
@@ -15,8 +21,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from agents.io import atomic_write_bytes  # noqa: E402
+from agents.io import SCRATCH, ResultFile, add_out_argument, repo_relative  # noqa: E402
+from scripts.benchmark_envs import DEFAULT_OUT as DEFAULT_JSON  # noqa: E402
+from scripts.benchmark_envs import report_partial  # noqa: E402
 
+DEFAULT_OUT = SCRATCH / "benchmarks" / "envs.png"
+MARKER = "Memory Gym benchmark"  # PNG text chunk: "full", or "partial: <why>"
 SERIES = (  # (label, how to read the value from one id's result)
     ("memory-gym 1.0.2, 1 env", lambda r: r.get("reference_single_steps_per_s")),
     ("ours, 1 env", lambda r: r["single"]["steps_per_s"]),
@@ -26,8 +36,8 @@ SERIES = (  # (label, how to read the value from one id's result)
 )
 
 
-def plot(results: dict, out: Path) -> None:
-    """Grouped log-scale bars, one group per id; written atomically."""
+def chart(results: dict, partial: str = "") -> bytes:
+    """Grouped log-scale bars, one group per id, as PNG bytes marked full or partial (``partial``: why)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -51,18 +61,40 @@ def plot(results: dict, out: Path) -> None:
     ax.grid(axis="y", which="both", alpha=0.3)
     fig.tight_layout()
     image = io.BytesIO()
-    fig.savefig(image, format="png", dpi=110)
-    atomic_write_bytes(out, image.getvalue())
+    fig.savefig(image, format="png", dpi=110, metadata={MARKER: f"partial: {partial}" if partial else "full"})
     plt.close(fig)
+    return image.getvalue()
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--json", type=Path, default=ROOT / "results" / "benchmarks" / "envs.json")
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "benchmarks" / "envs.png")
-    args = parser.parse_args()
-    plot(json.loads(args.json.read_text())["results"], args.out)
-    print(f"wrote {args.out}")
+def chart_holds_full(path: Path) -> bool:
+    """Whether the PNG at ``path`` charts a full benchmark: unless its marker says partial (a chart drawn before the
+    marker existed counts as full). A file that is no image holds no table."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            return not str(image.info.get(MARKER, "full")).startswith("partial")
+    except (OSError, ValueError):
+        return False
+
+
+def main(argv: list[str] | None = None) -> Path:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(
+        "--json", type=Path, default=DEFAULT_JSON, help=f"the benchmark (default {repo_relative(DEFAULT_JSON)})"
+    )
+    add_out_argument(parser, DEFAULT_OUT, "the chart")
+    args = parser.parse_args(argv)
+    try:
+        report = json.loads(args.json.read_text())
+    except FileNotFoundError:
+        parser.error(
+            f"--json {args.json}: no such file; run scripts/benchmark_envs.py first, or chart the committed table "
+            "with --json results/benchmarks/envs.json"
+        )
+    partial = report_partial(report)
+    target = ResultFile.for_command(parser, args.out, DEFAULT_OUT, chart_holds_full, partial)
+    return target.save(chart(report["results"], partial), partial)
 
 
 if __name__ == "__main__":

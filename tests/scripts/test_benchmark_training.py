@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from agents.io import ROOT, SCRATCH
 from scripts import benchmark_training
 
 
@@ -34,3 +37,17 @@ def test_benchmark_writes_a_complete_record(tmp_path: Path) -> None:
     assert set(record["versions"]) >= {"python", "torch", "numpy", "gymnasium"}
     assert record["git"]["revision"] and record["machine"]["cpu_count"]
     assert not list(tmp_path.glob(".*tmp*"))  # the atomic write left no temporary file
+
+
+def test_a_partial_run_never_replaces_a_full_table(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert benchmark_training.DEFAULT_OUT == SCRATCH / "benchmarks" / "training.json"  # git-ignored, not results/
+    full = tmp_path / "training.json"  # the committed table, copied: every method and SB3
+    shutil.copy(ROOT / "results" / "benchmarks" / "training.json", full)
+    before = full.read_bytes()
+    for partial, why in ((["--methods", "gru,ppo"], "2 of 5 methods"), (["--sb3", "no"], "--sb3 no")):
+        with pytest.raises(SystemExit) as exit_:  # refused before anything is measured
+            benchmark_training.main([*partial, "--out", str(full)])
+        assert exit_.value.code == 2
+        err = capsys.readouterr().err
+        assert f"{full} holds a full table and this run is partial ({why}" in err and "--out PATH" in err
+    assert full.read_bytes() == before and list(tmp_path.iterdir()) == [full]
