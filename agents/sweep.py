@@ -167,7 +167,7 @@ def panel_from_dict(
     check_name("panel", panel)
     root = Path(root)
     runs, seen = [], {}
-    for point in expand_grid(raw, overrides):
+    for point in map(separate_cells, expand_grid(raw, overrides)):
         run_name = _run_name(panel, point)
         if run_name in seen:
             raise ConfigError(
@@ -181,12 +181,28 @@ def panel_from_dict(
 
 def _run_name(panel: str, point: GridPoint) -> str:
     config = point.config
-    method = point.choice("method") or config.method
-    task = point.choice("task") or config.task
-    check_name("the method's name", method)
-    check_name("the task's name", task)
-    extra = [f"{axis}={_path_safe(label)}" for axis, label in point.choices if "." in axis and axis != "run.seed"]
-    return "/".join([panel, method, task, *extra, f"seed{config.run.seed}"])
+    check_name("the method's name", config.method)
+    check_name("the task's name", config.task)
+    return "/".join([panel, config.method, config.task, f"seed{config.run.seed}"])
+
+
+def separate_cells(point: GridPoint) -> GridPoint:
+    """The point with its plain axes other than ``run.seed`` written into its cell's names, so that the runs of one
+    (method, task) cell differ by their seed only, as the panel's results demand (different experiments are never
+    pooled): ``env.*`` axes extend the task (``pom+env.options.delay=8``), the others the method
+    (``gru+ppo.gamma=0.9``). A point without such axes is returned as it is."""
+    config = point.config
+    extra = [(axis, label) for axis, label in point.choices if "." in axis and axis != "run.seed"]
+    if not extra:
+        return point
+
+    def extended(name: str, axes: list[tuple[str, str]]) -> str:
+        return name + "".join(f"+{axis}={_path_safe(label)}" for axis, label in axes)
+
+    method = extended(point.choice("method") or config.method, [a for a in extra if not a[0].startswith("env.")])
+    task = extended(point.choice("task") or config.task, [a for a in extra if a[0].startswith("env.")])
+    run = dataclasses.replace(config.run, method=method, task=task)
+    return dataclasses.replace(point, config=dataclasses.replace(config, run=run))
 
 
 def _path_safe(text: str) -> str:
@@ -589,7 +605,7 @@ def final_evaluation(run: SweepRun, device: str = "cpu") -> list[dict[str, Any]]
     """The records of the run's last checkpoint on its novel seeds (the run's ``eval`` block: seeds, repetitions,
     sampling seed), kept in ``<run>/evaluation/`` as ``scripts/evaluate.py`` writes them and reused when they are of
     that checkpoint."""
-    from agents.evaluation import evaluate_runs, read_records
+    from agents.evaluation import evaluate_runs, read_records, seed_list
 
     latest = latest_checkpoint(run.run_dir)
     update = checkpoint_update(latest) if latest is not None else finished_update(run.run_dir)
@@ -598,14 +614,25 @@ def final_evaluation(run: SweepRun, device: str = "cpu") -> list[dict[str, Any]]
     step = update * run.config.batch_size
     out = run.run_dir / FINAL_EVALUATION
     path = out / "episodes.csv"
-    if path.is_file():
-        records = read_records(path)
-        if records and all(record["step"] == step for record in records):
-            return records
+    # The directory may also hold a user's own evaluations (scripts/evaluate.py writes here by default, perhaps with
+    # other seeds or checkpoints): those rows are kept, and only the protocol's records of this checkpoint count.
+    seeds = set(seed_list(run.config.eval_seeds))
+    repetitions = run.config.eval.repetitions
+
+    def protocol_records() -> list[dict[str, Any]]:
+        return [
+            record
+            for record in (read_records(path) if path.is_file() else [])
+            if record["step"] == step and record["seed"] in seeds and record["repetition"] < repetitions
+        ]
+
+    records = protocol_records()
+    if len(records) == len(seeds) * repetitions:
+        return records
     if latest is None:
         raise SweepError(f"{run.name}: finished, but neither its checkpoint nor its final evaluation is here")
-    evaluate_runs([run.run_dir], out, device=device)
-    return read_records(path)
+    evaluate_runs([run.run_dir], out, device=device, force=True)
+    return protocol_records()
 
 
 def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, echo: Echo = print) -> Path:

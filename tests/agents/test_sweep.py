@@ -189,11 +189,11 @@ def test_slurm_time_limits() -> None:
 
 def test_run_names_and_panels() -> None:
     panel = panel_from_dict({**TINY, "grid": {"run.seed": [0, 1], "ppo.gamma": [0.9, 0.99], "panel": "p1"}})
-    assert [run.name for run in panel.runs] == [  # another plain axis than run.seed names its value
-        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.9/seed0",
-        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.99/seed0",
-        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.9/seed1",
-        "p1/gru/ProofOfMemory-v0+delay=3/ppo.gamma=0.99/seed1",
+    assert [run.name for run in panel.runs] == [  # another plain axis than run.seed is part of the method's name
+        "p1/gru+ppo.gamma=0.9/ProofOfMemory-v0+delay=3/seed0",
+        "p1/gru+ppo.gamma=0.99/ProofOfMemory-v0+delay=3/seed0",
+        "p1/gru+ppo.gamma=0.9/ProofOfMemory-v0+delay=3/seed1",
+        "p1/gru+ppo.gamma=0.99/ProofOfMemory-v0+delay=3/seed1",
     ]
     single = panel_from_dict(TINY, name="solo")  # a config without a grid is one run
     assert [run.name for run in single.runs] == ["solo/gru/ProofOfMemory-v0+delay=3/seed0"]
@@ -201,6 +201,30 @@ def test_run_names_and_panels() -> None:
         panel_from_dict({**TINY, "grid": {"model.helm.lm": ["a b", "a_b"]}}, name="p")
     with pytest.raises(ConfigError, match="grid.panel"):
         panel_from_dict(TINY)
+
+
+def test_plain_axes_never_pool_different_experiments_in_one_cell() -> None:
+    """The records' (method, task) cell of a sweep run holds the runs of its seeds only: an env.* axis extends the
+    task's name, any other plain axis the method's, so the panel's results never refuse (or pool) them."""
+    from agents.results import config_digest
+    from agents.sweep import run_coordinates
+
+    grid = {"method": {"gru": {}}, "task": {"pom": {}}, "run.seed": [0, 1], "ppo.gamma": [0.9, 0.99]}
+    panel = panel_from_dict({**TINY, "grid": {**grid, "env.options.delay": [2, 4]}}, name="p")
+    cells: dict[tuple[str, str], set[str]] = {}
+    for run in panel.runs:
+        cells.setdefault((run.config.method, run.config.task), set()).add(config_digest(run.config))
+    assert sorted(cells) == [
+        (f"gru+ppo.gamma={gamma}", f"pom+env.options.delay={delay}") for gamma in (0.9, 0.99) for delay in (2, 4)
+    ]
+    assert all(len(digests) == 1 for digests in cells.values())  # the two seeds of a cell: one experiment
+    first = panel.runs[0]
+    assert first.name == "p/gru+ppo.gamma=0.9/pom+env.options.delay=2/seed0"
+    assert run_coordinates(first)["method"] == "gru"  # --only still selects by the bundle's name
+    plain = panel_from_dict({**TINY, "grid": grid | {"ppo.gamma": [0.9]}}, name="q")
+    assert {run.config.method for run in plain.runs} == {"gru+ppo.gamma=0.9"}
+    named = panel_from_dict({**TINY, "grid": {"method": {"gru": {}}, "run.seed": [0]}}, name="r")
+    assert named.runs[0].config.method == "gru" and named.runs[0].name == "r/gru/ProofOfMemory-v0+delay=3/seed0"
 
 
 def test_states_mismatches_and_locks(tmp_path: Path) -> None:

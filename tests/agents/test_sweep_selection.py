@@ -32,19 +32,19 @@ def _names(panels: list) -> list[str]:
 
 def test_one_item_keeps_the_runs_that_match_all_its_pairs() -> None:
     (panel,) = select_runs([_panel()], ["method=gru,task=long,seed=1"])
-    assert _names([panel]) == ["p/gru/long/ppo.gamma=0.9/seed1", "p/gru/long/ppo.gamma=0.99/seed1"]
+    assert _names([panel]) == ["p/gru+ppo.gamma=0.9/long/seed1", "p/gru+ppo.gamma=0.99/long/seed1"]
     assert panel.selection == ("method=gru,task=long,seed=1",)
     (panel,) = select_runs([_panel()], ["method=ppo,ppo.gamma=0.90,run.seed=0,task=short"])  # 0.90 is the 0.9 run
-    assert _names([panel]) == ["p/ppo/short/ppo.gamma=0.9/seed0"]
+    assert _names([panel]) == ["p/ppo+ppo.gamma=0.9/short/seed0"]
     assert len(select_runs([_panel()], ["run.method=ppo"])[0].runs) == 8  # run.method / run.task name the bundles
 
 
 def test_repeated_items_add_their_runs() -> None:
     panels = select_runs([_panel()], ["method=gru,task=short,ppo.gamma=0.9,seed=0", "method=ppo,task=long,seed=1"])
     assert _names(panels) == [  # in the grid's order, each run once
-        "p/gru/short/ppo.gamma=0.9/seed0",
-        "p/ppo/long/ppo.gamma=0.9/seed1",
-        "p/ppo/long/ppo.gamma=0.99/seed1",
+        "p/gru+ppo.gamma=0.9/short/seed0",
+        "p/ppo+ppo.gamma=0.9/long/seed1",
+        "p/ppo+ppo.gamma=0.99/long/seed1",
     ]
     assert _names(select_runs([_panel()], ["seed=0", "seed=0,method=gru"])) == _names(
         select_runs([_panel()], ["seed=0"])
@@ -100,7 +100,7 @@ def test_the_dry_run_lists_the_selected_runs_only(tmp_path: Path) -> None:
     text = describe([panel])
     assert "panel p: 2 runs selected by --only method=ppo,task=short,ppo.gamma=0.99" in text
     rows = [line.split()[0] for line in text.splitlines() if line.startswith("  p/")]
-    assert rows == ["p/ppo/short/ppo.gamma=0.99/seed0", "p/ppo/short/ppo.gamma=0.99/seed1"]
+    assert rows == ["p/ppo+ppo.gamma=0.99/short/seed0", "p/ppo+ppo.gamma=0.99/short/seed1"]
     assert "steps: 256 agent steps in 2 runs" in text and "runs: 0 finished, 0 partial, 2 new, 0 running" in text
     assert "panel p: 1 run selected" in describe(
         select_runs([_panel(root=tmp_path)], ["method=gru,seed=0,task=long,ppo.gamma=0.9"])

@@ -127,6 +127,26 @@ def test_local_sweep_end_to_end_with_evaluate(tmp_path: Path, capsys: pytest.Cap
     assert summary_after["runs"] == [r for r in summary_before["runs"] if r["run"].startswith("two/ppo/")]
 
 
+def test_the_final_evaluation_keeps_and_ignores_a_users_own_evaluations(tmp_path: Path) -> None:
+    """scripts/evaluate.py writes into <run>/evaluation by default: the sweep's final evaluation neither mistakes those
+    records (other seeds) for its own nor is refused by them, and leaves them in place."""
+    from scripts import evaluate as evaluate_script
+
+    config = _write(tmp_path / "one.yaml", {"method": {"gru": {}}, "task": {"pom": {}}, "run.seed": [3]})
+    root = tmp_path / "runs"
+    assert sweep_script.main([str(config), "--root", str(root)]) == 0
+    run_dir = root / "one" / "gru" / "pom" / "seed3"
+    assert evaluate_script.main(["--run", str(run_dir), "--seeds", "200000..200001", "--repetitions", "1"]) == 0
+    mine = read_records(run_dir / "evaluation" / "episodes.csv")
+    assert {(r["step"], r["seed"]) for r in mine} == {(192, 200_000), (192, 200_001)}
+    assert sweep_script.main([str(config), "--root", str(root), "--no-train", "--evaluate"]) == 0
+    panel = read_records(root / "one" / "results" / "episodes.csv")
+    final = sorted((r["seed"], r["repetition"]) for r in panel if r["step"] == 192)
+    assert final == [(seed, rep) for seed in (100_000, 100_001, 100_002) for rep in (0, 1)]
+    kept = read_records(run_dir / "evaluation" / "episodes.csv")
+    assert [r for r in kept if r["seed"] >= 200_000] == mine
+
+
 def test_a_killed_sweep_finishes_on_the_second_call(tmp_path: Path) -> None:
     grid = {"method": {"short": {"model.memory": "none"}, "long": {"run.total_steps": 30 * 64}}, "run.seed": [0]}
     config = _write(tmp_path / "kill.yaml", grid)
