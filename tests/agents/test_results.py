@@ -451,13 +451,28 @@ def test_configs_are_compared_within_a_cell_and_by_each_runs_latest_rows(tmp_pat
         results.read_episodes(tmp_path / "c")
 
 
-@pytest.mark.parametrize("directory", ["results/cpu/mm_grid_1/results", "results/examples/proof_of_memory"])
+@pytest.mark.parametrize("directory", ["results/cpu/mm_grid_1/results", "results/cpu/mm_grid_1_delay4/results"])
 def test_committed_records_without_the_new_columns_still_load(directory: str) -> None:
     loaded = results.read_results(ROOT / directory)
     for table in (loaded.episodes, loaded.training):
         assert set(table[results.CONFIG_COLUMN].tolist()) == {""}
     assert set(loaded.episodes[results.OPTIONS_COLUMN].tolist()) == {""}
     assert len(results.aggregate(loaded.episodes, steps="last", reps=50))
+
+
+def test_the_committed_example_records_carry_one_experiment_per_cell() -> None:
+    """results/examples/ was regenerated with the new columns: every (method, task) cell holds one config digest,
+    the five methods five different ones, and the options are the config's."""
+    loaded = results.read_results(ROOT / "results" / "examples" / "proof_of_memory")
+    cells: dict[tuple[str, str], set[str]] = {}
+    for table in (loaded.episodes, loaded.training):
+        for method, task, digest in zip(
+            table["method"].tolist(), table["task"].tolist(), table[results.CONFIG_COLUMN].tolist(), strict=True
+        ):
+            cells.setdefault((method, task), set()).add(digest)
+    assert len(cells) == 5 and all(len(digests) == 1 and "" not in digests for digests in cells.values())
+    assert len({digest for digests in cells.values() for digest in digests}) == 5
+    assert set(loaded.episodes[results.OPTIONS_COLUMN].tolist()) == {'{"delay":6}'}
 
 
 def test_task_options_come_from_the_records_or_the_saved_configs(tmp_path: Path) -> None:
