@@ -214,6 +214,17 @@ def _fix_range(axes: Axes, low: float | None, high: float | None, axis: str = "y
     set_(bottom - pad if low is not None else bottom, top + pad if high is not None else top)
 
 
+def _decorate(axes: Axes, env_id: str, options: Any, column: str, zoom: bool, title: str) -> bool:
+    """Title, y label, the metric's range (unless ``zoom``) and the chance line of one curves panel; whether the
+    chance line was drawn."""
+    drawn = _draw_chance(axes, chance_level(env_id, options, column))
+    if not zoom:
+        _fix_range(axes, *metric_range(env_id, column))
+    axes.set_title(title, fontsize=10)
+    axes.set_ylabel(metric_label(env_id, column))
+    return drawn
+
+
 def _draw_chance(axes: Axes, chance: float | None, axis: str = "y") -> bool:
     if chance is None:
         return False
@@ -281,11 +292,7 @@ def curves_figure(
             else []
         )
         drawn |= _draw_curves(novel, rows, colors)
-        chance_drawn |= _draw_chance(novel, chance_level(env_id, options.get(task), column))
-        if not zoom:
-            _fix_range(novel, *metric_range(env_id, column))
-        novel.set_title(f"{title}: novel seeds", fontsize=10)
-        novel.set_ylabel(metric_label(env_id, column))
+        chance_drawn |= _decorate(novel, env_id, options.get(task), column, zoom, f"{title}: novel seeds")
         if training is not None:
             left = panels[row, 0]
             curves = results.training_curves(training.where(task=task), column=training_column, points=points)
@@ -295,11 +302,8 @@ def curves_figure(
                 for estimate in results.estimate(scores, curve_task, reps=reps, confidence=confidence, seed=seed)
             ]
             drawn |= _draw_curves(left, rows, colors)
-            chance_drawn |= _draw_chance(left, chance_level(env_id, options.get(task), training_column))
-            if not zoom:
-                _fix_range(left, *metric_range(env_id, training_column))
-            left.set_title(f"{title}: training seeds", fontsize=10)
-            left.set_ylabel(metric_label(env_id, training_column))
+            title_left = f"{title}: training seeds"
+            chance_drawn |= _decorate(left, env_id, options.get(task), training_column, zoom, title_left)
         for axes in panels[row]:
             axes.set_xlabel(STEPS_LABEL if row == len(tasks) - 1 else "")
     missing = [method for method in colors if method in methods and method not in drawn]
