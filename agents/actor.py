@@ -63,7 +63,7 @@ class Decision:
     inputs: dict[str, Tensor]  # the model's inputs (stacked observations)
     newest: dict[str, Tensor]  # the per-step fields to store: newest frame/vector, previous action/reward, helm
     episode_step: Tensor  # (B,) decisions since each slot's episode start
-    memory_state: Tensor  # the memory state fed into this step
+    record: Tensor  # what the buffer keeps of the memory at this step (the state fed in, for a recurrent memory)
     actions: Tensor  # (B, branches) int64
     log_probs: Tensor  # (B, branches)
     values: Tensor  # (B,)
@@ -131,15 +131,17 @@ class Actor:
         """The policy's decision for every active slot on the current inputs (sampled, or argmax with ``greedy``);
         a stopped slot (evaluation) costs nothing, keeps its memory state and gets action 0."""
         inputs = self.inputs()
-        state = self.memory.recurrent
+        state, episode_step = self.memory.recurrent, self.memory.episode_step
         with torch.inference_mode():
             if self.active.all():
-                logits, values, next_state = self.model.step(inputs, state)
+                logits, values, next_state = self.model.step(inputs, state, episode_step)
                 actions, log_probs = choose_actions(logits, self.generator, greedy)
             else:
                 rows = torch.from_numpy(np.flatnonzero(self.active)).to(self.device)
                 some = {name: tensor.index_select(0, rows) for name, tensor in inputs.items()}
-                logits, some_values, some_state = self.model.step(some, state.index_select(0, rows))
+                logits, some_values, some_state = self.model.step(
+                    some, state.index_select(0, rows), episode_step.index_select(0, rows)
+                )
                 some_actions, some_log_probs = choose_actions(logits, self.generator, greedy)
                 actions = some_actions.new_zeros((self.num_envs, some_actions.shape[1])).index_copy(
                     0, rows, some_actions
@@ -151,9 +153,9 @@ class Actor:
         for name in ("previous_action", "previous_reward", "helm"):
             if name in inputs:
                 newest[name] = inputs[name]
+        record = self.model.memory.record(state, next_state)
         return Decision(
-            inputs, newest, self.memory.episode_step.clone(), self.memory.recurrent, actions, log_probs, values,
-            next_state,
+            inputs, newest, episode_step.clone(), record, actions, log_probs, values, next_state
         )  # fmt: skip
 
     def advance(self, decision: Decision) -> Outcome:
@@ -167,7 +169,8 @@ class Actor:
         rewards_t = torch.from_numpy(rewards).to(self.device)
         terminated_t = torch.from_numpy(terminated).to(self.device)
         alive = ~terminated_t
-        memory.recurrent = decision.next_state.float() * alive.view(-1, *([1] * (decision.next_state.dim() - 1)))
+        next_state = decision.next_state.to(self.model.memory.state_dtype)  # a bf16 acting copy keeps its state dtype
+        memory.recurrent = next_state * alive.view(-1, *([1] * (next_state.dim() - 1)))
         memory.previous_action = torch.where(alive.unsqueeze(-1), decision.actions, -1)
         memory.previous_reward = rewards_t * alive
         memory.episode_step = (memory.episode_step + 1) * alive

@@ -150,7 +150,7 @@ class ModelConfig:
     """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
 
     encoder: str = param("nature_cnn", "visual encoder (agents.models.ENCODERS)")
-    memory: str = param("gru", "memory module (agents.models.MEMORY_MODULES): none, gru, lstm")
+    memory: str = param("gru", "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm")
     memory_size: int = param(512, "hidden units of the recurrent layer", low=1)
     memory_layers: int = param(1, "stacked recurrent layers", low=1)
     hidden_size: int = param(512, "units of the body layer and of each of the policy and value streams", low=1)
@@ -569,7 +569,8 @@ def _check_block(block: Any, prefix: str) -> None:
     if isinstance(block, EnvConfig):
         _check_env(block, prefix)
     elif isinstance(block, ModelConfig):
-        from agents.models import ENCODERS, MEMORY_MODULES  # the registries the model is built from
+        from agents.memory import MEMORY_MODULES  # the registries the model is built from
+        from agents.models import ENCODERS
 
         _choice(f"{prefix}.encoder", block.encoder, tuple(ENCODERS))
         _choice(f"{prefix}.memory", block.memory, tuple(MEMORY_MODULES))

@@ -6,17 +6,13 @@
     vector obs, previous action (one-hot), previous reward ---+-> concat -> memory -> body FC -> policy FC -> heads
                                 -> Linear(128) + ReLU --------+                               -> value FC  -> value
 
-The encoder and the memory module come from one registry each (:data:`ENCODERS`, :data:`MEMORY_MODULES`), which the
-config validation reads too. With frame stacking the image (and vector) input holds the last k observations along
-the channels; with the HELM branch, its cached output (:mod:`agents.helm`) joins the CNN features.
-The memory module is ``none`` (identity), ``gru`` or ``lstm``. Non-recurrent layers always see a flat batch of
-real steps; only the memory module sees the (sequences, length) layout, which it takes from the padding mask of
-the minibatch (:meth:`RecurrentMemory.sequences`, which runs the recurrence packed, so padding costs nothing; the
-GRU runs through :func:`agents.packed_gru.packed_gru`, whose backward suits the CPU).
-A memory module keeps its state as one tensor per environment
-(``state_shape``), so the buffer stores it like any other field. A transformer memory (``trxl``) or a HELM branch
-(a frozen feature extractor whose outputs the buffer caches) plug into the same seams: a new entry in
-:data:`MEMORY_MODULES`, or a new encoder concatenated in :meth:`ActorCritic.encode`.
+The encoder and the memory module come from one registry each (:data:`ENCODERS`, and
+:data:`agents.memory.MEMORY_MODULES` with the memory interface), which the config validation reads too. With frame
+stacking the image (and vector) input holds the last k observations along the channels; with the HELM branch, its
+cached output (:mod:`agents.helm`) joins the CNN features. Non-memory layers always see a flat batch of real steps;
+only the memory module sees the (sequences, length) layout, which it takes from the padding mask of the minibatch.
+This module does not know which memory it holds: the model passes the memory's state, records and each step's
+``episode_step`` through.
 
 Initialisation, as in the authors' code: orthogonal weights with gain sqrt(2) for hidden and recurrent layers, 0.1
 for the policy heads, 1 for the value head; convolution and linear biases keep PyTorch's default (uniform) init, and
@@ -25,7 +21,6 @@ only the recurrent biases are zeroed.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -34,14 +29,10 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
-from torch.nn.utils.rnn import PackedSequence
 
 from agents.config import ModelConfig
-from agents.packed_gru import packed_gru
-
-HIDDEN_GAIN = math.sqrt(2)
-POLICY_GAIN = 0.1
-VALUE_GAIN = 1.0
+from agents.layers import HIDDEN_GAIN, POLICY_GAIN, VALUE_GAIN, compute_dtype, orthogonal
+from agents.memory import MEMORY_MODULES, NoMemory, RecurrentMemory  # noqa: F401 (re-exported)
 
 
 @dataclass(frozen=True)
@@ -122,24 +113,6 @@ def join_frames(frames: Tensor) -> Tensor:
     return torch.cat(frames.unbind(1), dim=-1)
 
 
-def compute_dtype(weight: Tensor) -> torch.dtype:
-    """The dtype a layer computes in: the autocast type when autocast is on, else its weights' own type."""
-    device = weight.device.type
-    return torch.get_autocast_dtype(device) if torch.is_autocast_enabled(device) else weight.dtype
-
-
-def orthogonal(layer: nn.Module, gain: float) -> nn.Module:
-    """Orthogonal weights with ``gain``, in place; returns the layer. Biases keep PyTorch's default init, except a
-    recurrent layer's, which start at zero (as in the authors' code, baselines.md section 1)."""
-    recurrent = isinstance(layer, nn.RNNBase)
-    for name, param in layer.named_parameters():
-        if "weight" in name:
-            nn.init.orthogonal_(param, gain)
-        elif "bias" in name and recurrent:
-            nn.init.zeros_(param)
-    return layer
-
-
 class NatureCNN(nn.Module):
     """Three convolutions (32 8x8/4, 64 4x4/2, 64 3x3/1) with ReLU on uint8 HWC images, flattened."""
 
@@ -170,104 +143,6 @@ class NatureCNN(nn.Module):
         pixels = images.permute(0, 3, 1, 2).to(compute_dtype(self.convs[0].weight)).mul_(1.0 / 255.0)
         return self.convs(pixels)
 
-
-class NoMemory(nn.Module):
-    """The memory-less model: features pass straight through, the state is empty."""
-
-    def __init__(self, input_size: int) -> None:
-        super().__init__()
-        self.output_size = input_size
-        self.state_shape: tuple[int, ...] = (0,)
-
-    def initial_state(self, batch: int, device: torch.device | str) -> Tensor:
-        return torch.zeros((batch, *self.state_shape), device=device)
-
-    def step(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
-        return features, state
-
-    def sequences(self, features: Tensor, start_state: Tensor, mask: Tensor) -> Tensor:
-        return features
-
-
-class RecurrentMemory(nn.Module):
-    """A GRU or LSTM whose state is one tensor per environment: (layers, H) or, for the LSTM, (2, layers, H)."""
-
-    def __init__(self, kind: str, input_size: int, hidden_size: int, layers: int) -> None:
-        super().__init__()
-        rnn_class = {"gru": nn.GRU, "lstm": nn.LSTM}[kind]
-        self.rnn = orthogonal(rnn_class(input_size, hidden_size, layers, batch_first=True), HIDDEN_GAIN)
-        self.kind = kind
-        self.output_size = hidden_size
-        self.state_shape = (layers, hidden_size) if kind == "gru" else (2, layers, hidden_size)
-
-    def initial_state(self, batch: int, device: torch.device | str) -> Tensor:
-        return torch.zeros((batch, *self.state_shape), device=device)
-
-    def step(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
-        """One step of ``B`` environments: features (B, F), state (B, *state_shape)."""
-        if self._packed_gru(features):  # a packed batch of B one-step sequences; each layer's output is its new state
-            dtype = compute_dtype(self.rnn.weight_ih_l0)
-            states, layer_input = [], features
-            for layer, h0 in enumerate(state.transpose(0, 1)):
-                layer_input = packed_gru(self.rnn, layer_input, h0[None], [features.shape[0]], dtype, layer)
-                states.append(layer_input)
-            return layer_input.to(features.dtype), torch.stack(states, dim=1)
-        output, final = self.rnn(features.unsqueeze(1), self._to_rnn(state.to(features.dtype)))
-        return output.squeeze(1), self._from_rnn(final)
-
-    def sequences(self, features: Tensor, start_state: Tensor, mask: Tensor) -> Tensor:
-        """Run whole sequences: ``features`` (N, F) are the real steps in sequence order, ``mask`` (S, P) marks
-        which of the P positions of each of the S sequences are real (a prefix), ``start_state`` (S, ...) is the
-        state the policy had at each sequence start. Returns the outputs of the N real steps, in the same order.
-
-        The recurrence runs on the packed layout (at time t, only the sequences still running), so padding costs
-        nothing and cannot change any output: what the zero-padded (S, P) layout computes, minus the padding.
-        """
-        order = torch.argsort(mask.sum(dim=1), descending=True, stable=True)  # packing wants the longest first
-        row = torch.zeros(mask.shape, dtype=torch.int64, device=mask.device)
-        row[mask] = torch.arange(features.shape[0], device=mask.device)  # where each real step sits in `features`
-        sorted_mask = mask[order]
-        time_major = row[order].T[sorted_mask.T]  # packed order: step t of every sequence longer than t
-        batch_sizes = sorted_mask.sum(dim=0).cpu()
-        batch_sizes = batch_sizes[batch_sizes > 0]
-        packed_rows = features.index_select(0, time_major)  # gathers of whole rows, both ways (no scatter)
-        if self._packed_gru(features):
-            dtype = compute_dtype(self.rnn.weight_ih_l0)
-            layer_input = packed_rows
-            for layer in range(self.rnn.num_layers):
-                h0 = start_state[order, layer][None]
-                layer_input = packed_gru(self.rnn, layer_input, h0, batch_sizes.tolist(), dtype, layer)
-            output = layer_input.to(features.dtype)
-        else:
-            packed = PackedSequence(packed_rows, batch_sizes, order, torch.argsort(order))
-            output = self.rnn(packed, self._to_rnn(start_state.to(features.dtype)))[0].data
-        sequence_order = torch.empty_like(time_major)
-        sequence_order[time_major] = torch.arange(time_major.shape[0], device=time_major.device)
-        return output.index_select(0, sequence_order)
-
-    def _packed_gru(self, features: Tensor) -> bool:
-        """Whether the GRU runs through :func:`packed_gru`: on the CPU, where ``nn.GRU``'s packed backward works step
-        by step; elsewhere ``nn.GRU`` (cuDNN's fused kernels on CUDA) is the faster one."""
-        return self.kind == "gru" and features.device.type == "cpu"
-
-    def _to_rnn(self, state: Tensor) -> Tensor | tuple[Tensor, Tensor]:
-        if self.kind == "gru":
-            return state.transpose(0, 1).contiguous()
-        return state[:, 0].transpose(0, 1).contiguous(), state[:, 1].transpose(0, 1).contiguous()
-
-    def _from_rnn(self, state: Tensor | tuple[Tensor, Tensor]) -> Tensor:
-        if self.kind == "gru":
-            return state.transpose(0, 1)
-        hidden, cell = state
-        return torch.stack((hidden.transpose(0, 1), cell.transpose(0, 1)), dim=1)
-
-
-# The one registry of memory modules (the config validation reads its keys): name -> builder(config, input size).
-MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], nn.Module]] = {
-    "none": lambda config, input_size: NoMemory(input_size),
-    "gru": lambda config, input_size: RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers),
-    "lstm": lambda config, input_size: RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers),
-}
 
 # The one registry of visual encoders: name -> class taking the (H, W, C) image shape, with ``output_size``.
 ENCODERS: dict[str, Callable[[tuple[int, int, int]], nn.Module]] = {"nature_cnn": NatureCNN}
@@ -307,6 +182,10 @@ class ActorCritic(nn.Module):
     def state_shape(self) -> tuple[int, ...]:
         return self.memory.state_shape
 
+    @property
+    def record_shape(self) -> tuple[int, ...]:
+        return self.memory.record_shape
+
     def initial_state(self, batch: int, device: torch.device | str) -> Tensor:
         """The memory state at the start of an episode (zeros), for ``batch`` environments."""
         return self.memory.initial_state(batch, device)
@@ -335,22 +214,29 @@ class ActorCritic(nn.Module):
         logits = [head(policy).float() for head in self.policy_heads]
         return logits, self.value_head(value).squeeze(-1).float()
 
-    def step(self, inputs: dict[str, Tensor], state: Tensor) -> tuple[list[Tensor], Tensor, Tensor]:
-        """Rollout: one step of B environments. Returns logits, values (B,) and the next memory state."""
-        output, next_state = self.memory.step(self.encode(inputs), state)
+    def step(
+        self, inputs: dict[str, Tensor], state: Tensor, episode_step: Tensor | None = None
+    ) -> tuple[list[Tensor], Tensor, Tensor]:
+        """Rollout: one step of B environments (``episode_step`` (B,): decisions since each one's episode start).
+        Returns logits, values (B,) and the next memory state."""
+        output, next_state = self.memory.step(self.encode(inputs), state, episode_step)
         logits, values = self.heads(output)
         return logits, values, next_state
 
-    def evaluate(self, inputs: dict[str, Tensor], start_state: Tensor, mask: Tensor) -> tuple[list[Tensor], Tensor]:
-        """Training: the N real steps of S sequences (flat, in sequence order), their start states (S, ...) and
-        their padding mask (S, P). Returns logits and values of the N steps.
+    def evaluate(
+        self, inputs: dict[str, Tensor], records: Tensor, mask: Tensor, episode_step: Tensor | None = None
+    ) -> tuple[list[Tensor], Tensor]:
+        """Training: the N real steps of S sequences (flat, in sequence order), the memory records the buffer
+        gathered for them (:meth:`agents.buffer.RolloutBuffer.memory_records`: a recurrent memory's start states
+        (S, ...)), their padding mask (S, P) and each step's ``episode_step`` (N,). Returns logits and values of the N
+        steps.
 
         ``inputs`` may hold filler rows after the N real ones (see :func:`agents.ppo.filled_index`): they pass
         through the layers that act on single steps, so those keep a few fixed shapes, but they never enter the
         memory and are dropped from the outputs, so they change no output and no gradient."""
         features = self.encode(inputs)
         real_steps = int(mask.sum())
-        output = self.memory.sequences(features[:real_steps], start_state, mask)
+        output = self.memory.sequences(features[:real_steps], records, mask, episode_step)
         if features.shape[0] > real_steps:
             output = torch.cat((output, output.new_zeros(features.shape[0] - real_steps, *output.shape[1:])))
         logits, values = self.heads(output)

@@ -105,7 +105,7 @@ def ppo_update(
 
     Raises ``FloatingPointError`` (before touching the weights) when a loss or the gradient norm is not finite.
     """
-    states = buffer.flat(buffer.memory_states)
+    episode_steps = buffer.flat(buffer.episode_step)
     actions, old_log_probs = buffer.flat(buffer.actions), buffer.flat(buffer.log_probs)
     old_values, returns = buffer.flat(buffer.values), buffer.flat(buffer.returns)
     advantages = buffer.flat(buffer.advantages)
@@ -121,8 +121,9 @@ def ppo_update(
                 filled = filled_index(index)
                 logits, values = model.evaluate(
                     buffer.gather(filled),
-                    rows(states, batch.start_index),
+                    buffer.memory_records(batch.start_index, batch.mask.shape[1]),
                     batch.mask,
+                    rows(episode_steps, index),
                 )
             log_probs, entropy = log_probs_and_entropy(logits, rows(actions, index))
             minibatch_advantages = rows(advantages, index)

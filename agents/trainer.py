@@ -106,9 +106,11 @@ class Trainer:
             config.run.worker_steps,
             self.model.inputs,
             len(self.model.action_dims),
-            self.model.state_shape,
+            self.model.record_shape,
             self.device,
             config.model.frame_stack,
+            self.model.memory.history,
+            self.model.memory.state_dtype,
         )
         self.actor = Actor(self.core, self.rollout_model, config, self.action_generator, self.helm, self.device)
         self.actor.start(self._episode_seeds(workers), seed_source=self._episode_seeds)
@@ -145,8 +147,8 @@ class Trainer:
     @property
     def sequence_length(self) -> int | None:
         """Steps per training sequence: 1 without a memory module, None for whole episode pieces ('max')."""
-        if self.config.model.memory == "none":
-            return 1  # no recurrence: every step is a sequence of its own, no padding exists
+        if self.model.memory.stateless:
+            return 1  # no memory: every step is a sequence of its own, no padding exists
         length = self.config.ppo.sequence_length
         return None if length == "max" else int(length)
 
@@ -229,7 +231,8 @@ class Trainer:
 
         buffer = self.buffer
         with torch.inference_mode():
-            _, last_values, _ = self.rollout_model.step(self.actor.inputs(), self.actor.memory.recurrent)
+            memory = self.actor.memory
+            _, last_values, _ = self.rollout_model.step(self.actor.inputs(), memory.recurrent, memory.episode_step)
         buffer.advantages.copy_(
             gae_advantages(
                 buffer.rewards,
@@ -286,11 +289,12 @@ class Trainer:
         """Fill the buffer with ``worker_steps`` decisions of every worker; returns the final infos of ended
         episodes."""
         buffer, actor, finished = self.buffer, self.actor, []
-        buffer.begin(actor.memory.stacks)
+        memory = self.model.memory
+        buffer.begin(actor.memory.stacks, memory.history_records(actor.memory.recurrent) if memory.history else None)
         for t in range(buffer.steps):
             decision = actor.decide()
             buffer.store(t, decision.newest, decision.episode_step)
-            buffer.memory_states[:, t] = decision.memory_state
+            buffer.store_record(t, decision.record)
             buffer.actions[:, t] = decision.actions
             buffer.log_probs[:, t] = decision.log_probs
             buffer.values[:, t] = decision.values

@@ -101,7 +101,7 @@ def network_bound(trainer: Trainer) -> float:
     """Env steps per second if an update cost only the network's forward + backward passes over its minibatches."""
     config, buffer, model = trainer.config, trainer.buffer, trainer.model
     sequences = split_sequences(buffer.terminated_numpy(), trainer.sequence_length)
-    states, actions = buffer.flat(buffer.memory_states), buffer.flat(buffer.actions)
+    episode_steps, actions = buffer.flat(buffer.episode_step), buffer.flat(buffer.actions)
     rng = np.random.default_rng(0)
     epochs = []
     for _ in range(config.ppo.epochs):
@@ -110,13 +110,14 @@ def network_bound(trainer: Trainer) -> float:
             batch = pad_sequences(sequences, ids, device=buffer.device)
             index = batch.step_index
             gathered = buffer.gather(filled_index(index))
-            minibatches.append((gathered, states[batch.start_index], batch.mask, actions[index]))
+            records = buffer.memory_records(batch.start_index, batch.mask.shape[1])
+            minibatches.append((gathered, records, batch.mask, episode_steps[index], actions[index]))
         epochs.append(minibatches)
     started = time.perf_counter()
     for minibatches in epochs:
-        for gathered, start_states, mask, minibatch_actions in minibatches:
+        for gathered, records, mask, steps, minibatch_actions in minibatches:
             with trainer.autocast():
-                logits, values = model.evaluate(gathered, start_states, mask)
+                logits, values = model.evaluate(gathered, records, mask, steps)
             log_probs, entropy = log_probs_and_entropy(logits, minibatch_actions)
             (log_probs.mean() + entropy.mean() + values.square().mean()).backward()
     seconds = time.perf_counter() - started

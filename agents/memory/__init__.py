@@ -1,0 +1,41 @@
+"""The memory modules, one module per family, and their one registry (:data:`MEMORY_MODULES`).
+
+A memory sits between the encoders and the body of :class:`agents.models.ActorCritic`. The actor, the rollout buffer,
+the sequence batching and the PPO update only speak this interface (:class:`agents.memory.base.Memory`), so a new
+memory is one new file here and one registry entry:
+
+* ``output_size``: width of its output.
+* **State** (``state_shape``, ``state_dtype``): what a slot carries from one decision to the next, one tensor per
+  slot; zeros are an episode start (the actor clears a slot by zeroing its row), and a checkpoint stores it as is,
+  so a resume restores it bit for bit.
+* ``step(features, state, episode_step)``: one decision of B slots; ``episode_step`` (B,) counts the decisions
+  since each slot's episode start (a window memory reads how much of its window is the episode's from it).
+* **Records** (``record_shape``, :meth:`~agents.memory.base.Memory.record`): what the buffer keeps of every step.
+  A recurrent memory keeps the state fed into the step; a transformer the step's layer inputs.
+* ``history``: ``None`` when the training pass needs the record at each sequence start only (truncated BPTT from
+  stored start states); an int h when it needs the h records before each sequence start and the sequence's own
+  records. The buffer then also keeps h records from before the rollout (``history_records`` of the state the slots
+  carried in, as frame stacks carry their k - 1 frames) and gathers (S, h + P, ...) per minibatch, never a window per
+  step.
+* ``sequences(features, records, mask, episode_step)``: the training pass over the real steps of S padded sequences.
+* ``stateless``: no memory at all (every step is a sequence of its own).
+
+Families: :mod:`agents.memory.recurrent` (``none``, ``gru``, ``lstm``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from agents.config import ModelConfig
+from agents.memory.base import Memory
+from agents.memory.recurrent import NoMemory, RecurrentMemory
+
+# The one registry of memory modules (the config validation reads its keys): name -> builder(config, input size).
+MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], Memory]] = {
+    "none": lambda config, input_size: NoMemory(input_size),
+    "gru": lambda config, input_size: RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers),
+    "lstm": lambda config, input_size: RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers),
+}
+
+__all__ = ["MEMORY_MODULES", "Memory", "NoMemory", "RecurrentMemory"]
