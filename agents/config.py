@@ -146,11 +146,38 @@ class HelmConfig:
 
 
 @dataclass
+class TrxlConfig:
+    """The Transformer-XL memory (``model.memory: trxl``, agents/memory/transformer.py): sequence-to-one blocks whose
+    query is the current step and whose keys and values are the cached inputs of that block at the previous
+    ``memory_length`` steps of the same episode."""
+
+    layers: int = param(3, "transformer blocks", low=1)
+    heads: int = param(4, "attention heads (dim must be a multiple)", low=1)
+    dim: int = param(384, "width of the blocks (the memory's output size)", low=1)
+    memory_length: int = param(119, "steps of the episode before the current one that a step attends to", low=1)
+    positional_encoding: str = param(
+        "relative",
+        "'relative' (sinusoidal, by distance to the current step: any episode length), 'absolute' (sinusoidal) or "
+        "'learned' (by episode step, refused past positional_size), or 'none'",
+    )
+    positional_size: int = param(
+        1024, "episode steps the 'absolute' and 'learned' encodings cover (a longer episode is an error)", low=1
+    )
+    layer_norm: str = param("pre", "'pre', 'post' or 'none'")
+    gating: bool = param(False, "GTrXL: GRU gates in place of the residual connections")
+    gating_bias: float = param(2.0, "GTrXL gate bias (a positive bias starts the blocks near the identity)")
+    shared_head_projections: bool = param(
+        False, "CleanRL's variant: one (dim/heads)^2 projection shared by all heads, instead of full dim^2 ones"
+    )
+    cache_dtype: str = param("fp32", "dtype of the cached layer inputs in the slots and the buffer: 'fp32' or 'bf16'")
+
+
+@dataclass
 class ModelConfig:
     """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
 
     encoder: str = param("nature_cnn", "visual encoder (agents.models.ENCODERS)")
-    memory: str = param("gru", "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm")
+    memory: str = param("gru", "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm, trxl")
     memory_size: int = param(512, "hidden units of the recurrent layer", low=1)
     memory_layers: int = param(1, "stacked recurrent layers", low=1)
     hidden_size: int = param(512, "units of the body layer and of each of the policy and value streams", low=1)
@@ -164,6 +191,7 @@ class ModelConfig:
     )
     grayscale: bool = param(False, "turn images into one luma channel (ITU-R 601) before stacking")
     helm: HelmConfig = param(HelmConfig(), "the HELM branch (off unless helm.lm is set)")
+    trxl: TrxlConfig = param(TrxlConfig(), "the Transformer-XL memory (used with memory: trxl)")
 
 
 @dataclass
@@ -579,6 +607,14 @@ def _check_block(block: Any, prefix: str) -> None:
             raise ConfigError(
                 f"{prefix}.random_width={block.random_width} is invalid: expected a multiple of "
                 f"{prefix}.random_heads={block.random_heads}"
+            )
+    elif isinstance(block, TrxlConfig):
+        _choice(f"{prefix}.positional_encoding", block.positional_encoding, ("relative", "absolute", "learned", "none"))
+        _choice(f"{prefix}.layer_norm", block.layer_norm, ("pre", "post", "none"))
+        _choice(f"{prefix}.cache_dtype", block.cache_dtype, ("fp32", "bf16"))
+        if block.dim % block.heads:
+            raise ConfigError(
+                f"{prefix}.dim={block.dim} is invalid: expected a multiple of {prefix}.heads={block.heads}"
             )
     elif isinstance(block, EvalConfig):
         _seed_range(f"{prefix}.seeds", block.seeds, allow_empty=True)

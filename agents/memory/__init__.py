@@ -20,7 +20,7 @@ memory is one new file here and one registry entry:
 * ``sequences(features, records, mask, episode_step)``: the training pass over the real steps of S padded sequences.
 * ``stateless``: no memory at all (every step is a sequence of its own).
 
-Families: :mod:`agents.memory.recurrent` (``none``, ``gru``, ``lstm``).
+Families: :mod:`agents.memory.recurrent` (``none``, ``gru``, ``lstm``), :mod:`agents.memory.transformer` (``trxl``).
 """
 
 from __future__ import annotations
@@ -30,12 +30,14 @@ from collections.abc import Callable
 from agents.config import ModelConfig
 from agents.memory.base import Memory
 from agents.memory.recurrent import NoMemory, RecurrentMemory
+from agents.memory.transformer import TransformerXL
 
 # The one registry of memory modules (the config validation reads its keys): name -> builder(config, input size).
 MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], Memory]] = {
     "none": lambda config, input_size: NoMemory(input_size),
     "gru": lambda config, input_size: RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers),
     "lstm": lambda config, input_size: RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers),
+    "trxl": lambda config, input_size: TransformerXL(config.trxl, input_size),
 }
 
-__all__ = ["MEMORY_MODULES", "Memory", "NoMemory", "RecurrentMemory"]
+__all__ = ["MEMORY_MODULES", "Memory", "NoMemory", "RecurrentMemory", "TransformerXL"]

@@ -46,6 +46,11 @@ HELM = (  # a tiny random transformer with a memory shorter than the episodes
     "model.helm.random_vocab=64",
 )
 
+# a small Transformer-XL whose window (3 steps) is shorter than the episodes (delay 4: 5 steps), which straddle the
+# 16-step rollouts: windows reach back into the previous rollout, and a resume must restore them
+TRXL = ("model.trxl.layers=2", "model.trxl.heads=2", "model.trxl.dim=16", "model.trxl.memory_length=3")
+TRXL = (*TRXL, "env.options.delay=4")
+
 
 def _config(*overrides: str, raw: dict | None = None):
     return config_from_dict(raw or TINY, list(overrides))
@@ -76,8 +81,10 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         ("model.memory=none", "model.previous_action=true", "model.previous_reward=true"),
         ("model.memory=gru", "run.precision=bf16"),
         ("model.memory=none", "model.frame_stack=4", "model.grayscale=true", "env.frame_skip=2"),
+        ("model.memory=trxl", *TRXL, "ppo.sequence_length=3"),
+        ("model.memory=trxl", *TRXL, "model.trxl.cache_dtype=bf16", "run.precision=bf16", "model.trxl.gating=true"),
     ],
-    ids=["gru-max", "lstm-3", "none", "gru-bf16", "stack4-gray-skip2"],
+    ids=["gru-max", "lstm-3", "none", "gru-bf16", "stack4-gray-skip2", "trxl-3", "trxl-bf16-gated"],
 )
 def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overrides: tuple[str, ...]) -> None:
     """Killed after update 5 with checkpoints every 2: the resumed run ends with the same weights, TensorBoard
