@@ -50,7 +50,8 @@ def build_agent(
             random_vocab=h.random_vocab,
         ).to(device)
     helm_size = 0 if helm is None else helm.output_size
-    model = ActorCritic(observation_space, action_space, config.model, helm_size).to(device)
+    reconstruction = config.ppo.reconstruction_coef > 0
+    model = ActorCritic(observation_space, action_space, config.model, helm_size, reconstruction).to(device)
     return model, helm
 
 

@@ -212,6 +212,12 @@ class PPOConfig:
     sequence_length: int | str = param(
         "max", "BPTT sequence length: an int >= 1 or 'max' (the longest episode)", expect="an int >= 1 or 'max'"
     )
+    reconstruction_coef: float = param(
+        0.0,
+        "weight of the observation-reconstruction loss (a transposed-CNN decoder from the memory output, BCE against "
+        "the newest frame / 255; the JMLR TrXL runs use 0.1 on some tasks); 0: no decoder",
+        low=0.0,
+    )
 
 
 @dataclass

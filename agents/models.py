@@ -144,6 +144,44 @@ class NatureCNN(nn.Module):
         return self.convs(pixels)
 
 
+class ObservationDecoder(nn.Module):
+    """The observation-reconstruction head of the JMLR TrXL runs (CleanRL's ``ppo_trxl``): the memory output ->
+    Linear(64 x h x w) + ReLU -> transposed convolutions mirroring the Nature CNN -> per-pixel logits of the newest
+    frame, (N, H, W, C); :meth:`loss` is the binary cross-entropy against the observation / 255."""
+
+    def __init__(self, input_size: int, image_shape: tuple[int, int, int]) -> None:
+        super().__init__()
+        height, width, channels = image_shape
+        sides = [(height, width)]
+        for kernel, stride in ((8, 4), (4, 2), (3, 1)):
+            sides.append(tuple((s - kernel) // stride + 1 for s in sides[-1]))
+        self.side = sides[-1]
+
+        def up(cin: int, cout: int, kernel: int, stride: int, into: tuple[int, ...], out: tuple[int, ...]) -> nn.Module:
+            extra = tuple(o - ((i - 1) * stride + kernel) for i, o in zip(into, out, strict=True))  # floor remainders
+            return orthogonal(nn.ConvTranspose2d(cin, cout, kernel, stride, output_padding=extra), HIDDEN_GAIN)
+
+        self.linear = nn.Sequential(orthogonal(nn.Linear(input_size, 64 * self.side[0] * self.side[1]), HIDDEN_GAIN))
+        self.deconvs = nn.Sequential(
+            nn.ReLU(),
+            up(64, 64, 3, 1, sides[3], sides[2]),
+            nn.ReLU(),
+            up(64, 32, 4, 2, sides[2], sides[1]),
+            nn.ReLU(),
+            up(32, channels, 8, 4, sides[1], sides[0]),
+        )
+
+    def forward(self, memory_output: Tensor) -> Tensor:
+        hidden = self.linear(memory_output).view(-1, 64, *self.side)
+        return self.deconvs(hidden).permute(0, 2, 3, 1)  # back to (N, H, W, C)
+
+    def loss(self, memory_output: Tensor, images: Tensor) -> Tensor:
+        """Mean BCE of the reconstruction of ``images`` (N, H, W, k C) uint8, whose newest frame is the target."""
+        logits = self(memory_output).float()
+        target = images[..., -logits.shape[-1] :].float() / 255.0
+        return F.binary_cross_entropy_with_logits(logits, target)
+
+
 # The one registry of visual encoders: name -> class taking the (H, W, C) image shape, with ``output_size``.
 ENCODERS: dict[str, Callable[[tuple[int, int, int]], nn.Module]] = {"nature_cnn": NatureCNN}
 
@@ -152,10 +190,16 @@ class ActorCritic(nn.Module):
     """Shared trunk (encoders, memory, body) with separate policy and value streams."""
 
     def __init__(
-        self, observation_space: gym.Space, action_space: gym.Space, config: ModelConfig, helm_size: int = 0
+        self,
+        observation_space: gym.Space,
+        action_space: gym.Space,
+        config: ModelConfig,
+        helm_size: int = 0,
+        reconstruction: bool = False,
     ) -> None:
         """``helm_size``: width of the HELM branch's output (0: no branch); the branch itself is frozen and lives
-        with the actor, which caches its outputs as the ``helm`` input."""
+        with the actor, which caches its outputs as the ``helm`` input. ``reconstruction``: add the observation
+        decoder (``ppo.reconstruction_coef`` > 0), trained only through its loss."""
         super().__init__()
         self.action_dims = action_branches(action_space)
         self.inputs = model_inputs(observation_space, action_space, config, helm_size)
@@ -177,6 +221,8 @@ class ActorCritic(nn.Module):
         self.value_stream = nn.Sequential(orthogonal(nn.Linear(hidden, hidden), HIDDEN_GAIN), nn.ReLU())
         self.policy_heads = nn.ModuleList(orthogonal(nn.Linear(hidden, n), POLICY_GAIN) for n in self.action_dims)
         self.value_head = orthogonal(nn.Linear(hidden, 1), VALUE_GAIN)
+        frame_shape = observation_fields(observation_space, config.grayscale)["image"].shape
+        self.decoder = ObservationDecoder(self.memory.output_size, frame_shape) if reconstruction else None  # type: ignore[arg-type]
 
     @property
     def state_shape(self) -> tuple[int, ...]:
@@ -224,12 +270,17 @@ class ActorCritic(nn.Module):
         return logits, values, next_state
 
     def evaluate(
-        self, inputs: dict[str, Tensor], records: Tensor, mask: Tensor, episode_step: Tensor | None = None
-    ) -> tuple[list[Tensor], Tensor]:
+        self,
+        inputs: dict[str, Tensor],
+        records: Tensor,
+        mask: Tensor,
+        episode_step: Tensor | None = None,
+        reconstruct: bool = False,
+    ) -> tuple[list[Tensor], Tensor] | tuple[list[Tensor], Tensor, Tensor]:
         """Training: the N real steps of S sequences (flat, in sequence order), the memory records the buffer
         gathered for them (:meth:`agents.buffer.RolloutBuffer.memory_records`: a recurrent memory's start states
         (S, ...)), their padding mask (S, P) and each step's ``episode_step`` (N,). Returns logits and values of the N
-        steps.
+        steps, and with ``reconstruct`` the observation-reconstruction loss of those steps too.
 
         ``inputs`` may hold filler rows after the N real ones (see :func:`agents.ppo.filled_index`): they pass
         through the layers that act on single steps, so those keep a few fixed shapes, but they never enter the
@@ -240,7 +291,11 @@ class ActorCritic(nn.Module):
         if features.shape[0] > real_steps:
             output = torch.cat((output, output.new_zeros(features.shape[0] - real_steps, *output.shape[1:])))
         logits, values = self.heads(output)
-        return [branch[:real_steps] for branch in logits], values[:real_steps]
+        logits, values = [branch[:real_steps] for branch in logits], values[:real_steps]
+        if reconstruct:  # also the observation-reconstruction loss of the real steps (a model with a decoder)
+            assert self.decoder is not None, "reconstruct needs a model built with reconstruction=True"
+            return logits, values, self.decoder.loss(output[:real_steps], inputs["image"][:real_steps])
+        return logits, values
 
 
 # --------------------------------------------------------------------------------------- action distribution

@@ -109,6 +109,7 @@ def ppo_update(
     actions, old_log_probs = buffer.flat(buffer.actions), buffer.flat(buffer.log_probs)
     old_values, returns = buffer.flat(buffer.values), buffer.flat(buffer.returns)
     advantages = buffer.flat(buffer.advantages)
+    reconstruct = config.reconstruction_coef > 0
     if config.advantage_normalization == "batch":
         advantages = normalize(advantages)
     totals: dict[str, Tensor | float] = {}
@@ -119,12 +120,14 @@ def ppo_update(
             index = batch.step_index
             with autocast():
                 filled = filled_index(index)
-                logits, values = model.evaluate(
+                outputs = model.evaluate(
                     buffer.gather(filled),
                     buffer.memory_records(batch.start_index, batch.mask.shape[1]),
                     batch.mask,
                     rows(episode_steps, index),
+                    reconstruct,
                 )
+            logits, values = outputs[0], outputs[1]
             log_probs, entropy = log_probs_and_entropy(logits, rows(actions, index))
             minibatch_advantages = rows(advantages, index)
             if config.advantage_normalization == "minibatch":
@@ -142,10 +145,13 @@ def ppo_update(
                 config.value_coef,
                 entropy_coef,
             )
+            total = loss.total
+            if reconstruct:
+                total = total + config.reconstruction_coef * outputs[2]
             optimizer.zero_grad(set_to_none=True)
-            loss.total.backward()
+            total.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm, foreach=True)
-            if not torch.isfinite(torch.stack((loss.total.detach(), grad_norm))).all():  # one device sync
+            if not torch.isfinite(torch.stack((total.detach(), grad_norm))).all():  # one device sync
                 raise FloatingPointError(f"non-finite loss or gradient in epoch {epoch}: {_describe(loss, grad_norm)}")
             optimizer.step()
             terms = {
@@ -156,6 +162,8 @@ def ppo_update(
                 "clipfrac": loss.clipfrac,
                 "grad_norm": grad_norm,
             }
+            if reconstruct:
+                terms["reconstruction_loss"] = outputs[2]
             for name, value in terms.items():
                 totals[name] = totals.get(name, 0.0) + value.detach() * batch.num_steps
             steps_seen += batch.num_steps

@@ -760,7 +760,9 @@ _PARAMETERS: dict[str, int] = {}
 
 def parameter_count(config: Config) -> int:
     """Trainable parameters of the run's model (the frozen HELM branch is not checkpointed)."""
-    key = json.dumps([config.env.id, config.env.options, config_to_dict(config.model)], sort_keys=True, default=str)
+    reconstruction = config.ppo.reconstruction_coef > 0  # the decoder is trained, so it counts
+    settings = [config.env.id, config.env.options, config_to_dict(config.model), reconstruction]
+    key = json.dumps(settings, sort_keys=True, default=str)
     if key not in _PARAMETERS:
         import torch
 
@@ -770,7 +772,8 @@ def parameter_count(config: Config) -> int:
         core = envs.make_core(config.env.id, 1, config.env.options)
         helm = _helm_width(config) if config.model.helm.enabled else 0
         with torch.device("meta"):  # shapes only: no memory, no initialisation cost
-            model = ActorCritic(core.single_observation_space, core.single_action_space, config.model, helm)
+            spaces = core.single_observation_space, core.single_action_space
+            model = ActorCritic(*spaces, config.model, helm, reconstruction)
         _PARAMETERS[key] = sum(p.numel() for p in model.parameters() if p.requires_grad)
     return _PARAMETERS[key]
 

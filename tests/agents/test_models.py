@@ -276,3 +276,28 @@ def test_the_nn_gru_path_used_off_the_cpu_agrees_with_the_packed_path(monkeypatc
     torch.testing.assert_close(packed[0], nn_path[0], rtol=1e-5, atol=1e-6)
     for ours, theirs in zip(packed[1], nn_path[1], strict=True):
         torch.testing.assert_close(ours, theirs, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("side", [36, 84])
+def test_the_observation_decoder_mirrors_the_encoder_and_its_loss_reaches_the_memory(side: int) -> None:
+    """The decoder redraws the newest frame at the observation's size; its BCE (against obs / 255) is what the
+    model returns with reconstruct=True, and its gradient reaches the memory and the encoder."""
+    space = gym.spaces.Box(0, 255, (side, side, 3), np.uint8)
+    config = ModelConfig(memory="gru", memory_size=16, hidden_size=16, frame_stack=2)
+    torch.manual_seed(0)
+    model = ActorCritic(space, gym.spaces.Discrete(3), config, reconstruction=True)
+    assert ActorCritic(space, gym.spaces.Discrete(3), config).decoder is None
+    inputs = {"image": torch.randint(0, 256, (6, side, side, 6), dtype=torch.uint8)}
+    mask = torch.tensor([[True, True, True, True], [True, True, False, False]])
+    logits, values, loss = model.evaluate(inputs, torch.zeros(2, 1, 16), mask, None, reconstruct=True)
+    output = model.memory.sequences(model.encode(inputs), torch.zeros(2, 1, 16), mask)
+    assert model.decoder(output).shape == (6, side, side, 3)
+    expected = torch.nn.functional.binary_cross_entropy_with_logits(
+        model.decoder(output), inputs["image"][..., 3:].float() / 255
+    )
+    torch.testing.assert_close(loss, expected)
+    loss.backward()
+    assert (
+        model.memory.rnn.weight_ih_l0.grad.abs().sum() > 0 and model.image_encoder.convs[0].weight.grad.abs().sum() > 0
+    )
+    assert model.policy_heads[0].weight.grad is None  # only the reconstruction loss was taken
