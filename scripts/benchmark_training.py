@@ -3,6 +3,7 @@
     python scripts/benchmark_training.py [--env MortarMayhemB-Grid-v0] [--workers 16] [--worker-steps 128]
         [--epochs 3] [--minibatches 8] [--updates 4] [--repeats 3] [--precision bf16]
         [--methods gru,ppo,stack4,stack16,helm] [--sb3 auto]
+    python scripts/benchmark_training.py --env MortarMayhem-Grid-v0 --precision fp32 --methods gru,trxl,gtrxl --sb3 no
 
 * end to end, per method (configs/mortar_mayhem_b_grid/<method>.yaml at the benchmark's batch): ``train_update()``
   (rollout in the batched env, GAE, sequence splitting, PPO epochs with optimizer steps), env steps per second, with
@@ -12,6 +13,9 @@
   epochs (inputs gathered beforehand, frame stacks rebuilt, no rollout, no optimizer): batch size / time. End to
   end can only approach it; end to end / bound says what the rest of the pipeline (rollout, GAE, gathering and
   stacking, optimizer) costs, so a method's larger network and its machinery are told apart;
+* memory, for the Transformer-XL methods (``trxl``, ``gtrxl``: 3 blocks x 384, 4 heads, a window of 119): the bytes
+  per step of the buffer's memory records (each step's layer inputs, stored once, and the windows carried in), and
+  the measurement runs on CUDA as well (``--device cuda``: a few minutes), where the peak is torch's allocator's;
 * SB3: stable-baselines3-contrib RecurrentPPO at the same workers x steps, epochs and minibatch size, when
   ``sb3_contrib`` is importable (its own default network: CNN features 256, separate actor/critic LSTMs of 256).
 
@@ -52,7 +56,8 @@ from agents.trainer import Trainer  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"
-METHODS = ("gru", "ppo", "stack4", "stack16", "helm")
+METHODS = ("gru", "ppo", "stack4", "stack16", "helm")  # the full table
+EXTRA_METHODS = ("trxl", "gtrxl")  # measured on request (--methods), beside GRU-PPO at the same batch
 DEFAULT_OUT = SCRATCH / "benchmarks" / "training.json"
 
 
@@ -81,6 +86,7 @@ def benchmark_config(args: argparse.Namespace, method: str = "gru") -> Config:
         f"ppo.minibatches={args.minibatches}",
         f"run.precision={args.precision}",
         f"run.torch_threads={args.threads}",
+        f"run.device={args.device}",
         "run.progress_bar=false",
         "run.checkpoint_interval=0",
     ]
@@ -120,6 +126,10 @@ def network_bound(trainer: Trainer) -> float:
                 logits, values = model.evaluate(gathered, records, mask, steps)
             log_probs, entropy = log_probs_and_entropy(logits, minibatch_actions)
             (log_probs.mean() + entropy.mean() + values.square().mean()).backward()
+    if buffer.device.type == "cuda":  # the kernels queued must have run
+        import torch
+
+        torch.cuda.synchronize(buffer.device)
     seconds = time.perf_counter() - started
     model.zero_grad(set_to_none=True)
     return config.batch_size / seconds
@@ -188,9 +198,14 @@ def measure_method(args: argparse.Namespace, method: str) -> dict[str, float]:
             "helm_share": helm_seconds[0] / seconds,
             "parameters": float(sum(p.numel() for p in trainer.model.parameters())),
             "bytes_per_step": float(trainer.buffer.bytes_per_step),
+            "memory_bytes_per_step": float(trainer.buffer.memory_bytes_per_step),
         }
         row["bound"] = network_bound(trainer)
     row["peak_rss_mib"] = peak_rss_mib()
+    if config.run.device.startswith("cuda"):
+        import torch
+
+        row["peak_cuda_mib"] = torch.cuda.max_memory_allocated() / 2**20
     return row
 
 
@@ -227,10 +242,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="measurement rounds (medians are reported)")
     parser.add_argument("--precision", choices=["fp32", "bf16"], default="bf16")
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0: one per core)")
-    parser.add_argument("--methods", default=",".join(METHODS), help="comma-separated, from " + ", ".join(METHODS))
+    parser.add_argument("--device", default="cpu", help="run.device of every method (cpu, cuda, cuda:N)")
+    parser.add_argument(
+        "--methods", default=",".join(METHODS), help="comma-separated, from " + ", ".join(METHODS + EXTRA_METHODS)
+    )
     parser.add_argument("--helm-lm", default="random", help="model.helm.lm of the HELM run (default: random)")
     parser.add_argument("--sb3", choices=["auto", "yes", "no"], default="auto", help="include SB3 RecurrentPPO")
-    parser.add_argument("--child", choices=METHODS, help=argparse.SUPPRESS)  # one measurement, printed as JSON
+    parser.add_argument(
+        "--child", choices=METHODS + EXTRA_METHODS, help=argparse.SUPPRESS
+    )  # one measurement, printed as JSON
     add_out_argument(parser, DEFAULT_OUT, "the record")
     args = parser.parse_args(argv)
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -238,12 +258,23 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(measure_method(args, args.child)))
         return 0
     methods = [m for m in args.methods.split(",") if m]
-    unknown = sorted(set(methods) - set(METHODS))
+    unknown = sorted(set(methods) - set(METHODS + EXTRA_METHODS))
     if unknown or not methods:
-        parser.error(f"--methods {args.methods!r}: unknown {unknown}; valid methods: {', '.join(METHODS)}")
+        valid = ", ".join(METHODS + EXTRA_METHODS)
+        parser.error(f"--methods {args.methods!r}: unknown {unknown}; valid methods: {valid}")
     args.forwarded = [  # what a child needs to measure one method (it writes nothing)
         f"--{name.replace('_', '-')}={getattr(args, name)}"
-        for name in ("env", "workers", "worker_steps", "epochs", "minibatches", "updates", "precision", "threads")
+        for name in (
+            "env",
+            "workers",
+            "worker_steps",
+            "epochs",
+            "minibatches",
+            "updates",
+            "precision",
+            "threads",
+            "device",
+        )
     ] + [f"--helm-lm={args.helm_lm}"]
     use_sb3 = args.sb3 == "yes" or (args.sb3 == "auto" and sb3_available())
     no_sb3 = (
@@ -301,6 +332,7 @@ def main(argv: list[str] | None = None) -> int:
             "epochs": args.epochs,
             "minibatches": args.minibatches,
             "precision": args.precision,
+            "device": args.device,
             "methods": {m: f"configs/mortar_mayhem_b_grid/{m}.yaml" for m in methods},
             "helm_lm": args.helm_lm,
             "updates_per_round": args.updates,
@@ -318,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(
         f"\n{'method':10s}{'steps/s':>10s}{'best':>10s}{'/ PPO':>8s}{'/ GRU':>8s}"
-        f"{'bound':>8s}{'/ bound':>9s}{'rollout':>9s}{'HELM':>7s}{'peak MiB':>10s}"
+        f"{'bound':>8s}{'/ bound':>9s}{'rollout':>9s}{'HELM':>7s}{'peak MiB':>10s}{'memory B/step':>15s}"
     )
     median, best = summary["median"]["methods"], summary["best"]["methods"]  # type: ignore[index]
     for method in methods:
@@ -327,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"{method:10s}{m['end_to_end']:10.0f}{best[method]['end_to_end']:10.0f}{''.join(ratios)}"
             f"{m['bound']:8.0f}{m['end_to_end_over_bound']:9.2f}{m['rollout_share']:9.0%}{m['helm_share']:7.0%}"
-            f"{m['peak_rss_mib']:10.0f}"
+            f"{m.get('peak_cuda_mib', m['peak_rss_mib']):10.0f}{m['memory_bytes_per_step']:15,.0f}"
         )
     if summary["median"]["sb3_recurrent_ppo_steps_per_s"]:  # type: ignore[index]
         print(f"SB3 RecurrentPPO {summary['median']['sb3_recurrent_ppo_steps_per_s']:.0f} steps/s")  # type: ignore[index]

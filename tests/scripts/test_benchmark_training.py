@@ -51,3 +51,18 @@ def test_a_partial_run_never_replaces_a_full_table(tmp_path: Path, capsys: pytes
         err = capsys.readouterr().err
         assert f"{full} holds a full table and this run is partial ({why}" in err and "--out PATH" in err
     assert full.read_bytes() == before and list(tmp_path.iterdir()) == [full]
+
+
+def test_benchmark_measures_transformer_xl_beside_gru(tmp_path: Path) -> None:
+    """--methods gru,trxl: TrXL (configs/mortar_mayhem_b_grid/trxl.yaml: 3 x 384, window 119) at GRU-PPO's batch,
+    with the bytes per step of each memory's records: the GRU's start state (512 floats), TrXL's layer inputs
+    (3 x 384 floats) once per step plus the 119-step windows carried into the rollout."""
+    out = tmp_path / "training.json"
+    args = ["--env", "ProofOfMemory-v0", "--workers", "2", "--worker-steps", "16", "--epochs", "1"]
+    args += ["--minibatches", "2", "--updates", "1", "--repeats", "1", "--precision", "fp32", "--threads", "1"]
+    args += ["--methods", "gru,trxl", "--sb3", "no", "--out", str(out)]
+    assert benchmark_training.main(args) == 0
+    methods = json.loads(out.read_text())["summary"]["median"]["methods"]
+    assert methods["gru"]["memory_bytes_per_step"] == 512 * 4
+    assert methods["trxl"]["memory_bytes_per_step"] == 3 * 384 * 4 * (16 + 119) // 16
+    assert methods["trxl"]["end_to_end"] > 0 and methods["trxl"]["bound"] > 0 and methods["trxl"]["over_gru"] > 0
