@@ -77,6 +77,8 @@ METHOD_LABELS = {  # the paper's names of the agents, keyed by the method names 
     "stack16": "16-Stack",
     "helm": "HELM",
     "trxl": "TrXL-PPO",
+    "gtrxl": "GTrXL-PPO",
+    "trxl_recon": "TrXL-PPO + recon.",  # observation reconstruction (ppo.reconstruction_coef)
 }
 PART_LABELS = {"gru": "GRU", "lstm": "LSTM", "helm": "HELM"}  # parts of derived names such as gru-stack4
 STEPS_LABEL = "Environment steps (millions)"
