@@ -74,6 +74,10 @@ class BatchedCore:
     added_info_keys: ClassVar[frozenset[str]] = frozenset()
     ground_truth_space: gym.Space | None = None
     base_render_fps: ClassVar[int] = 25
+    # memory-gym draws some frames from what an instance's previous episode left behind (Mortar Mayhem's last agent
+    # sprite). Off: an episode depends only on its seed and options, whatever the slot played before. The parity
+    # replays turn it on (``core.reference_carryover = True``) to reproduce traces recorded on reused instances.
+    reference_carryover: bool = False
 
     def __init__(self, num_envs: int = 1, options: Mapping[str, Any] | None = None) -> None:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:

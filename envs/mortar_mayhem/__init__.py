@@ -19,8 +19,9 @@ Quirks of memory-gym 1.0.2 that are kept because they change what an agent sees 
 failing the last check still reports ``success=1`` and ``commands_completed=1.0``; dying in a lethal phase reports
 one command less than were rewarded; diagonal icons sit off-centre (rotated canvas, fixed corner); in the endless
 variant a round's new command is appended even when its last check failed (``max_command_sequence`` +1), the tiles
-stay red while the new icon is shown, and during a clue stream the agent keeps the sprite that was drawn last, which
-right after a reset is the previous episode's final sprite.
+stay red while the new icon is shown, and during a clue stream the agent keeps the sprite that was drawn last. Right
+after a reset the reference's sprite drawn last is the previous episode's final one; here it is the new agent's, as on
+a fresh instance, unless ``reference_carryover`` is set (the parity replays of traces recorded on reused instances).
 
 Modules: ``core`` (the batched core: state, reset, step and drawing in one class), ``options`` (reset options),
 ``records`` (the record layout of a slot), ``commands`` (the command list and the walk that draws an episode's

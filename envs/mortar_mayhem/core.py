@@ -98,9 +98,10 @@ class MortarMayhemCore(BatchedCore):
         # clue stream: the icon (command, or -1 for a blank frame) of every frame; `clue_pos` is the frame on screen
         self.stream = np.full((n, 64), -1, np.int64)
         # The reference caches the sprite (and rect) it drew last, and after a reset still shows it in the debug
-        # view and, in the endless variant, during the first clue stream. ``stale``: the slot shows that sprite
-        # (``drawn``: x, y, sprite, sheet; valid once anything was drawn) instead of its agent. It is set at reset
-        # and cleared by the first step that draws the agent.
+        # view and, in the endless variant, during the first clue stream. With ``reference_carryover`` (the parity
+        # replays only) this is kept: ``stale``: the slot shows that sprite (``drawn``: x, y, sprite, sheet; valid
+        # once anything was drawn) instead of its agent. It is set at reset and cleared by the first step that draws
+        # the agent. By default no slot is ever stale: a reset shows the new episode's agent, as on a fresh instance.
         self.drawn = np.zeros((n, 4), np.int64)
         self.drawn_valid = np.zeros(n, bool)
         self.stale = np.zeros(n, bool)
@@ -206,10 +207,11 @@ class MortarMayhemCore(BatchedCore):
                 streams.append([c for command in walked for c in [command] * duration + [-1] * delay])
 
         ks = np.array(slots, dtype=np.int64)
-        stale = self.stale[ks]  # else the sprite drawn last is this slot's agent: keep it (see the module doc)
-        drawing = ks[~stale] if stale.any() else ks
-        self.drawn[drawing] = self.slot_state[drawing, AGENT_COLUMNS]
-        self.stale[ks] = True
+        if self.reference_carryover:  # the reference's leftover sprite (see ``_first_step``); off by default
+            stale = self.stale[ks]  # else the sprite drawn last is this slot's agent: keep it
+            drawing = ks[~stale] if stale.any() else ks
+            self.drawn[drawing] = self.slot_state[drawing, AGENT_COLUMNS]
+            self.stale[ks] = True
         self.slot_state[ks] = rows
         width = max(len(walked) for walked in commands)
         self._ensure_commands(width)

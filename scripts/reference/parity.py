@@ -72,14 +72,17 @@ def reference_info(info: dict[str, Any], added: frozenset[str]) -> Any:
     return jsonable({key: value for key, value in info.items() if key not in added})
 
 
-def replay(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5) -> ParityResult:
-    """Replay every episode of ``env_id``'s trace file and count identical steps."""
+def replay(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5, carryover: bool = True) -> ParityResult:
+    """Replay every episode of ``env_id``'s trace file and count identical steps. ``carryover``: draw what the
+    reference's instance carried over from its previous episode (``BatchedCore.reference_carryover``, a documented
+    deviation that is off by default), as the traces recorded it."""
     trace = load_traces(env_id, root)
     result = ParityResult(env_id)
     env = None
     for episode in trace["episodes"]:
         if env is None or episode.get("fresh_env"):
             env = gym.make(env_id, disable_env_checker=True)
+            env.unwrapped.core.reference_carryover = carryover
         result.episodes += 1
         added = added_info_keys(env.unwrapped.core)
         obs, info = env.reset(seed=episode["seed"], options=episode["options"])
@@ -127,6 +130,7 @@ def replay_batched(env_id: str, root: Path = TRACES_DIR, max_mismatches: int = 5
         if ep["seed"] is not None and (i == 0 or ep.get("fresh_env") or trace[i - 1]["seed"] is not None)
     ]
     core = envs.make_core(env_id, num_envs=len(chosen))
+    core.reference_carryover = True  # the traces show what the reference carried over (see ``replay``)
     added = added_info_keys(core)
     episodes = [ep for _, ep in chosen]
     result = ParityResult(env_id, episodes=len(episodes))
