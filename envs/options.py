@@ -8,12 +8,16 @@ of the wrong type or outside the valid range raise ``ValueError`` naming the key
 from __future__ import annotations
 
 import difflib
+import math
 import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 KINDS = ("int", "float", "bool", "int_list", "float_list")
+# Where the range of an int option is open (steps, counts, healths), it ends here: the cores add such values to step
+# counters in int64 arrays, and larger ones overflowed (OverflowError) or asked for absurd allocations.
+INT_LIMIT = 2**31 - 1
 
 
 @dataclass(frozen=True)
@@ -30,20 +34,23 @@ class Option:
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"Option kind {self.kind!r} is not one of {KINDS}")
+        if self.kind in ("int", "int_list"):  # an open int range ends at +-INT_LIMIT (see there)
+            object.__setattr__(self, "low", -INT_LIMIT if self.low is None else self.low)
+            object.__setattr__(self, "high", INT_LIMIT if self.high is None else self.high)
 
     def describe(self) -> str:
         """A short description of the valid values, used in error messages."""
         bounds = ""
         if self.low is not None or self.high is not None:
-            lo = "-inf" if self.low is None else f"{self.low:g}"
-            hi = "inf" if self.high is None else f"{self.high:g}"
+            lo = "-inf" if self.low is None else _number_text(self.low)
+            hi = "inf" if self.high is None else _number_text(self.high)
             bounds = f" in [{lo}, {hi}]"
         return {
             "int": f"an int{bounds}",
-            "float": f"a number{bounds}",
+            "float": f"a finite number{bounds}",
             "bool": "a bool",
             "int_list": f"a {'' if self.allow_empty else 'non-empty '}list of ints{bounds}",
-            "float_list": f"a {'' if self.allow_empty else 'non-empty '}list of numbers{bounds}",
+            "float_list": f"a {'' if self.allow_empty else 'non-empty '}list of finite numbers{bounds}",
         }[self.kind]
 
     def _in_range(self, v: float) -> bool:
@@ -72,9 +79,20 @@ class Option:
             value = int(value)
         else:
             value = float(value) if not isinstance(value, numbers.Integral) else value
+            try:
+                finite = math.isfinite(value)  # NaN passes no range test, and no option means an infinite value
+            except OverflowError:  # an int too large for a float
+                finite = False
+            if not finite:
+                raise bad
         if not self._in_range(value):
             raise bad
         return value
+
+
+def _number_text(value: float) -> str:
+    """A bound as messages show it: 6, 0.04, 2147483647, 1e+09."""
+    return str(int(value)) if float(value).is_integer() and abs(value) <= INT_LIMIT else f"{value:g}"
 
 
 def _np_bool() -> type:

@@ -6,6 +6,10 @@ from envs.mortar_mayhem.commands import MAX_VECTOR_COMMANDS
 from envs.mortar_mayhem.pictures import AGENT_SCALE
 from envs.options import Option
 
+# Upper bounds the reference does not check: larger values overflowed the int64 episode records or allocated the
+# clue stream (count x (shown + blank) frames per slot) beyond memory; these are far above any published setting.
+MAX_COMMANDS, MAX_CLUE_FRAMES, MAX_PHASE_STEPS = 100, 100, 10_000
+
 
 def option_specs(grid: bool, clue_phase: bool, vector_observation: bool, endless: bool) -> dict[str, Option]:
     """The reset options of one variant, with the reference's names and defaults."""
@@ -22,15 +26,15 @@ def option_specs(grid: bool, clue_phase: bool, vector_observation: bool, endless
         specs["arena_size"] = Option(5, "int", 2, 6, doc="tiles per side")
     specs["allowed_commands"] = Option(5 if grid else 9, "int", 4, 9, doc="the first k commands of the fixed list")
     if endless:
-        specs["initial_command_count"] = Option(1, "int", 1, None, doc="commands of the first round")
+        specs["initial_command_count"] = Option(1, "int", 1, MAX_COMMANDS, doc="commands of the first round")
     else:
-        high = MAX_VECTOR_COMMANDS if vector_observation else None
+        high = MAX_VECTOR_COMMANDS if vector_observation else MAX_COMMANDS
         specs["command_count"] = Option([10], "int_list", 1, high, doc="number of commands (one entry sampled)")
     if clue_phase:
-        specs["command_show_duration"] = Option([3], "int_list", 1, None, doc="frames each icon is shown")
-        specs["command_show_delay"] = Option([1], "int_list", 0, None, doc="blank frames after each icon")
-    specs["explosion_duration"] = Option(duration, "int_list", 1, None, doc="steps the tiles stay lethal (E)")
-    specs["explosion_delay"] = Option(delay, "int_list", 1, None, doc="steps to reach the next target (D)")
+        specs["command_show_duration"] = Option([3], "int_list", 1, MAX_CLUE_FRAMES, doc="frames each icon is shown")
+        specs["command_show_delay"] = Option([1], "int_list", 0, MAX_CLUE_FRAMES, doc="blank frames after each icon")
+    specs["explosion_duration"] = Option(duration, "int_list", 1, MAX_PHASE_STEPS, doc="lethal steps (E)")
+    specs["explosion_delay"] = Option(delay, "int_list", 1, MAX_PHASE_STEPS, doc="steps to reach the next target (D)")
     specs["visual_feedback"] = Option(True, "bool", doc="lethal tiles turn red")
     specs["reward_command_failure"] = Option(0.0, "float")
     specs["reward_command_success"] = Option(0.1, "float")

@@ -10,7 +10,9 @@ def option_specs(grid: bool, endless: bool) -> dict[str, Option]:
     scale = Option(0.25, "float", 0.05, 1.0, doc="agent size (body radius int(25 * scale))")
     if grid:
         scale = Option(0.25, "float", 0.05, 1.0, doc="accepted but unused: the grid agent always has scale 0.25")
-    speed = Option(3.0, "float", 0.0, None, doc="pixels per step (cut to an int per axis)")
+    # <= 1000: the reference has no bound (and fails above 96 in the endless variant); far faster agents overflowed
+    # the int64 positions, and Endless MP generates every segment it crosses (1e6 px: 10^4 levels per step)
+    speed = Option(3.0, "float", 0.0, 1000.0, doc="pixels per step (cut to an int per axis)")
     if endless:
         return {
             "max_steps": Option(-1, "int", doc="the episode ends when t == max_steps (<= 0: never)"),

@@ -904,15 +904,18 @@ class SearingSpotlightsCore(BatchedCore):
     def _debug_frame(self, k: int) -> np.ndarray:
         """Floor, the darkness with the last step's holes, then exit, coins, agent and HUD above it."""
         floor = floor_rows(int(self.floor_kind[k]), bool(self.hit[k] and self.red_feedback[k]))
-        margin = 64  # room for spotlights partly or wholly off-screen
-        pixels = np.zeros((SCREEN + 2 * margin, SCREEN + 2 * margin), bool)
+        pixels = np.zeros((SCREEN, SCREEN), bool)
         spots = self.spots[k]
         for j in np.flatnonzero(spots["drawn"]):
             centre = spots["centre"][j]
             disc, offset = disc_mask(int(spots["radius"][j]))
-            top, left = int(centre.imag) + offset + margin, int(centre.real) + offset + margin
-            pixels[top : top + disc.shape[0], left : left + disc.shape[1]] |= disc
-        holes = np.repeat(pixels[margin:-margin, margin:-margin], 3, axis=1).astype(np.uint8) * 255
+            top, left = int(centre.imag) + offset, int(centre.real) + offset
+            # clipped to the screen: large spotlights (radius up to 42) start and end far off-screen
+            r0, c0 = max(top, 0), max(left, 0)
+            r1, c1 = min(top + disc.shape[0], SCREEN), min(left + disc.shape[1], SCREEN)
+            if r0 < r1 and c0 < c1:
+                pixels[r0:r1, c0:c1] |= disc[r0 - top : r1 - top, c0 - left : c1 - left]
+        holes = np.repeat(pixels, 3, axis=1).astype(np.uint8) * 255
         frames = np.zeros((2, SCREEN, ROW_BYTES), np.uint8)  # the picture and a scratch frame
         frames[0] = np.maximum(darken(floor, np.array(self.alpha(k))), floor & holes)
         if self.rings[k]:

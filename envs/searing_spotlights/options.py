@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from envs.options import Option
 
+# spot_damage <= 1e9 and the spawn intervals <= 1e6: the reference has no bounds; larger values overflowed the int
+# arithmetic of the health bar and the spawn schedule (far beyond any meaningful setting).
+
 
 def _common_options(endless: bool) -> dict[str, Option]:
     return {
@@ -14,7 +17,7 @@ def _common_options(endless: bool) -> dict[str, Option]:
         "spot_max_radius": Option(13.75, "float", 1, 42),
         "spot_min_speed": Option(0.0025, "float", 0, 1, doc="curve parameter advance per step"),
         "spot_max_speed": Option(0.0075, "float", 0, 1),
-        "spot_damage": Option(1.0, "float", 0, None, doc="health lost per step while a spotlight touches the agent"),
+        "spot_damage": Option(1.0, "float", 0, 1e9, doc="health lost per step while a spotlight touches the agent"),
         "visual_feedback": Option(True, "bool", doc="red chessboard on the steps the agent is hit"),
         "black_background": Option(False, "bool", doc="black floor; spotlights get a white 1-px ring"),
         "hide_chessboard": Option(False, "bool", doc="white floor"),
@@ -39,8 +42,8 @@ def _common_options(endless: bool) -> dict[str, Option]:
 SS_OPTIONS: dict[str, Option] = {
     **_common_options(endless=False),
     "num_spawns": Option(30, "int", 0, 100000, doc="spotlights spawned after reset, at most"),
-    "initial_spawn_interval": Option(30, "float", 0, None, doc="spawn interval = int(this + threshold) = 40"),
-    "spawn_interval_threshold": Option(10, "float", 0, None),
+    "initial_spawn_interval": Option(30, "float", 0, 1e6, doc="spawn interval = int(this + threshold) = 40"),
+    "spawn_interval_threshold": Option(10, "float", 0, 1e6),
     "spawn_interval_decay": Option(0.95, "float", 0, 1, doc="accepted; never applied (as in memory-gym)"),
     "num_coins": Option([1], "int_list", 0, 10, allow_empty=True, doc="coin count, drawn from the list"),
     "use_exit": Option(True, "bool", doc="after the coins, the exit must be reached"),
