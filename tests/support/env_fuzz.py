@@ -46,7 +46,7 @@ ALL_IDS = list(envs.ENV_IDS)
 # ------------------------------------------------------------------------------------------------------ profiles
 _COMMON = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow, HealthCheck.data_too_large]}
 settings.register_profile("ci", max_examples=30, derandomize=True, database=None, print_blob=True, **_COMMON)
-settings.register_profile("long", max_examples=40, derandomize=False, print_blob=True, **_COMMON)
+settings.register_profile("long", max_examples=20, derandomize=False, print_blob=True, **_COMMON)
 PROFILE = os.environ.get("HYPOTHESIS_PROFILE", "ci")
 settings.load_profile(PROFILE)
 
