@@ -98,6 +98,7 @@ def main(argv: list[str] | None = None) -> dict:
         "failures_total": sum(len(entry["failures"]) for entry in per_id.values()),
         "per_id": per_id,
         "found_and_fixed": env_fuzz.FOUND_AND_FIXED,
+        "harness_fixes": env_fuzz.HARNESS_FIXES,
     }
     record = {}
     if target.path.exists():  # keep the other sections of the record (the other reliability figures)

@@ -554,13 +554,16 @@ def check_invalid_input_refused(
             batch = np.array(rows)
         except ValueError:
             batch = np.array(rows, dtype=object)
-        try:
-            vec.step(batch)
-        except ValueError as err:
-            if batch.dtype.kind in "iu" and batch.shape == good.shape:  # a clean batch with one bad row
-                assert f"slot {bad_slot}" in str(err), f"{env_id}: slot {bad_slot} not named in {err}"
-        else:
-            raise AssertionError(f"{env_id}: vector actions {rows!r} were not refused")
+        clean = batch.dtype.kind in "iu" and batch.shape == good.shape
+        # numpy may turn the bad row into a valid one (True among ints becomes 1): then nothing is to be refused
+        if not (clean and vec.action_space.contains(batch.astype(np.int64))):
+            try:
+                vec.step(batch)
+            except ValueError as err:
+                if clean:  # an int batch with one bad row: the message names that slot
+                    assert f"slot {bad_slot}" in str(err), f"{env_id}: slot {bad_slot} not named in {err}"
+            else:
+                raise AssertionError(f"{env_id}: vector actions {rows!r} were not refused")
     vec.step(good)
     vec.close()
     env.close()
@@ -665,6 +668,18 @@ FOUND_AND_FIXED: list[dict[str, str]] = [
         "Mystery Path step generated ~10^4 levels and one case ran for minutes)",
         "regression_tests": "test_non_finite_and_huge_option_values_are_refused_by_name, "
         "test_extreme_valid_option_values_play",
+    },
+]
+
+
+# What the long profile found in the harness itself (fixed there; the environments were right).
+HARNESS_FIXES: list[dict[str, str]] = [
+    {
+        "ids": "MysteryPath-Grid-v0, Endless-MysteryPath-v0 (Discrete action spaces)",
+        "property": "invalid_refused",
+        "symptom": "the vector face 'accepted' the bad action True in slot 0 of [True, 3]: numpy builds the int batch "
+        "[1, 3] from that list, a valid batch (the single face refuses True itself)",
+        "fix": "the property expects a refusal only when the batch it builds is invalid",
     },
 ]
 
