@@ -78,19 +78,25 @@ def main(argv: list[str] | None = None) -> dict:
     add_out_argument(parser, DEFAULT_OUT, "the reliability record")
     args = parser.parse_args(argv)
     profile = env_fuzz.PROFILE
+    loaded = settings.get_profile(profile)
     if args.max_examples is not None:
-        settings.register_profile(profile, settings.get_profile(profile), max_examples=args.max_examples)
+        settings.register_profile(profile, loaded, max_examples=args.max_examples)
         settings.load_profile(profile)
     partial = {"per_id": dict.fromkeys(args.ids), "properties": args.properties, "profile": profile}
     target = ResultFile.for_command(parser, args.out, DEFAULT_OUT, holds_full, partial_reasons(partial))
     start = time.perf_counter()
-    per_id = env_fuzz.fuzz(args.ids, args.properties)
+    try:
+        per_id = env_fuzz.fuzz(args.ids, args.properties)
+        max_examples = settings.default.max_examples
+    finally:  # a caller in the same process (a test) keeps its profile
+        settings.register_profile(profile, loaded)
+        settings.load_profile(profile)
     section = {
         "command": " ".join(["python", "scripts/fuzz_envs.py", *(sys.argv[1:] if argv is None else argv)]),
         "git_revision": git_revision(),
         "versions": {"python": platform.python_version(), **{p: metadata.version(p) for p in PACKAGES}},
         "profile": profile,
-        "max_examples": settings.default.max_examples,
+        "max_examples": max_examples,
         "scale": vars(env_fuzz.SCALE),
         "properties": args.properties,
         "seconds": round(time.perf_counter() - start, 1),
