@@ -38,7 +38,34 @@ TINY = {
 
 @pytest.fixture(scope="module")
 def paper_panels() -> dict[str, object]:
-    return {path.stem: load_panel(path, root="runs") for path in sorted(PAPER.glob("*.yaml"))}
+    return {path.stem: load_panel(path, root="runs") for path in sorted(PAPER.glob("fig*.yaml"))}  # the ICLR paper
+
+
+def test_the_jmlr_grids_compare_gru_and_transformer_xl_with_cleanrl_settings() -> None:
+    """configs/paper/jmlr_*.yaml: 5 seeds per (method, task); TrXL with CleanRL's settings and per-task windows,
+    reconstruction where the grid says; GRU-PPO with the ICLR paper's Table 6."""
+    finite, endless = (load_panel(PAPER / f"jmlr_{name}.yaml", root="runs") for name in ("finite", "endless"))
+    assert len(finite.runs) == 75 and len(endless.runs) == 30
+    windows = {"mm": 275, "mm_grid": 119, "mp": 256, "mp_grid": 96, "ss": 256}
+    for run in [*finite.runs, *endless.runs]:
+        config = run.config
+        assert config.method in ("gru", "trxl", "trxl_recon") and config.model.memory == config.method[:4].rstrip("_")
+        if config.model.memory == "trxl":
+            trxl, ppo = config.model.trxl, config.ppo
+            assert (trxl.layers, trxl.heads, trxl.dim) == (3, 4, 384)
+            assert trxl.memory_length == windows.get(config.task, 256)
+            assert (ppo.gamma, ppo.clip_range.initial, ppo.value_coef, ppo.max_grad_norm) == (0.995, 0.1, 0.5, 0.25)
+            expected = 0.1 if config.method == "trxl_recon" or config.task == "endless_ss" else 0.0
+            assert ppo.reconstruction_coef == expected
+            normalised = "minibatch" if config.task == "mm_grid" else "none"
+            assert ppo.advantage_normalization == normalised
+        else:
+            assert (config.ppo.gamma, config.ppo.clip_range.initial, config.model.memory_size) == (0.99, 0.2, 512)
+    assert {run.config.env.id for run in endless.runs} == {
+        "Endless-MortarMayhem-v0",
+        "Endless-MysteryPath-v0",
+        "Endless-SearingSpotlights-v0",
+    }
 
 
 def test_paper_figures_have_the_papers_run_counts(paper_panels: dict) -> None:
