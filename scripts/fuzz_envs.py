@@ -3,7 +3,7 @@
     python scripts/fuzz_envs.py --out results/reliability.json        # the committed figures (about 10 minutes)
     python scripts/fuzz_envs.py --ids MortarMayhem-v0 --max-examples 5 # a quick look, into runs/reliability.json
 
-The properties and strategies are those of the CI tests (tests/support/env_fuzz.py, run by tests/envs/test_fuzz.py
+The properties and strategies are those of the CI tests (envs/fuzzing.py, run by tests/envs/test_fuzz.py
 under the bounded ``ci`` profile): faces agree slot for slot, a reset after any history plays the fresh episode,
 invalid input is refused by name. The record holds, per id, the cases tried per property, the failures (falsifying
 examples) and the seconds, with the git revision, the versions, the profile, the command and the bugs the fuzzing
@@ -36,7 +36,7 @@ PACKAGES = ("numpy", "gymnasium", "pygame", "hypothesis")
 
 def partial_reasons(record: dict) -> str:
     """Why a reliability record's fuzz section is not a full run (empty when it is one)."""
-    from tests.support.env_fuzz import ALL_IDS, PROPERTIES
+    from envs.fuzzing import ALL_IDS, PROPERTIES
 
     section = record.get(SECTION, record)
     reasons = []
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> dict:
     os.environ.setdefault("HYPOTHESIS_PROFILE", "long")
     from hypothesis import settings
 
-    from tests.support import env_fuzz
+    from envs import fuzzing as env_fuzz
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--ids", nargs="+", default=env_fuzz.ALL_IDS, choices=env_fuzz.ALL_IDS, metavar="ID")

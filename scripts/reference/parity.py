@@ -12,7 +12,6 @@ Runs with the project's python (it imports ``envs``), never inside the reference
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ import gymnasium as gym
 import numpy as np
 
 import envs  # registers the ids; make_core for the batched replay
+from envs.compare import jsonable, values_equal
 from scripts.reference import TRACES_DIR
 from scripts.reference.trace_format import load_traces, obs_digest
 
@@ -38,28 +38,6 @@ class ParityResult:
     @property
     def percent(self) -> float:
         return 100.0 * self.identical / max(self.steps, 1)
-
-
-def values_equal(a: Any, b: Any) -> bool:
-    """Equality for JSON-like values: numbers compare with a 1e-9 tolerance and NaN equals NaN."""
-    if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(values_equal(a[k], b[k]) for k in a)
-    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
-        return len(a) == len(b) and all(values_equal(x, y) for x, y in zip(a, b, strict=True))
-    if isinstance(a, int | float) and isinstance(b, int | float):
-        if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
-            return True
-        return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-9)
-    return a == b
-
-
-def jsonable(value: Any) -> Any:
-    """Numpy arrays and scalars as plain python lists and numbers (as the traces store them)."""
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, dict):
-        return {k: jsonable(v) for k, v in value.items()}
-    return value
 
 
 def added_info_keys(core: Any) -> frozenset[str]:

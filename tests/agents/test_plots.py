@@ -257,4 +257,11 @@ def test_plot_results_finds_the_options_of_older_records_in_the_saved_configs(tm
     (axes,) = figure.axes
     assert axes.get_title().startswith("MortarMayhem-Grid-v0, command_count=1")
     assert np.allclose(chance_lines(axes)[0].get_xdata(), 0.2)
-    assert [label.get_text() for label in axes.get_yticklabels()] == ["PPO", "GRU-PPO", "4-Stack", "16-Stack", "HELM"]
+    assert [label.get_text() for label in axes.get_yticklabels()] == [
+        "PPO",
+        "GRU-PPO",
+        "4-Stack",
+        "16-Stack",
+        "HELM",
+        "TrXL-PPO",
+    ]

@@ -1,12 +1,12 @@
 """Fuzzed environments (Hypothesis): random valid options, seeds and action scripts on every id and face, random
-invalid input. The properties live in tests/support/env_fuzz.py; ``HYPOTHESIS_PROFILE=long`` (or
+invalid input. The properties live in envs/fuzzing.py; ``HYPOTHESIS_PROFILE=long`` (or
 ``scripts/fuzz_envs.py``) runs many more cases than CI's bounded, derandomized ``ci`` profile."""
 
 from __future__ import annotations
 
 import pytest
 
-from tests.support.env_fuzz import ALL_IDS, PROPERTIES
+from envs.fuzzing import ALL_IDS, PROPERTIES
 
 
 @pytest.mark.parametrize("env_id", ALL_IDS)

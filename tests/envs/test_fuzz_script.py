@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+from envs.fuzzing import ALL_IDS, PROPERTIES
 from scripts import fuzz_envs
-from tests.support.env_fuzz import ALL_IDS, PROPERTIES
 
 
 def test_fuzz_script_writes_the_record_and_keeps_other_sections(tmp_path: Path) -> None:

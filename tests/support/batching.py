@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 
 import envs
+from envs.compare import jsonable, values_equal
 from envs.core import BatchedCore
-from scripts.reference.parity import jsonable, values_equal
 
 ActionChooser = Callable[[np.random.Generator, list[BatchedCore]], np.ndarray]
 

@@ -1,4 +1,5 @@
-"""Property-based fuzzing of every environment id (Hypothesis): strategies for valid and invalid options, seeds and
+"""Property-based fuzzing of every environment id (Hypothesis, from the dev extra: this module is imported only by the
+fuzz tests and ``scripts/fuzz_envs.py``, never by ``envs`` itself): strategies for valid and invalid options, seeds and
 action scripts, and the properties that ``tests/envs/test_fuzz.py`` runs in CI and ``scripts/fuzz_envs.py`` runs at
 length.
 
@@ -37,9 +38,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import envs
+from envs.compare import jsonable, values_equal
 from envs.core import BatchedCore
 from envs.options import Option
-from scripts.reference.parity import jsonable, values_equal
 
 ALL_IDS = list(envs.ENV_IDS)
 
