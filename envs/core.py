@@ -542,6 +542,30 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
             raise _no_limit_before_reset(self.core.env_name)
         return self.core.max_episode_steps.copy()
 
+    def get_attr(self, name: str) -> tuple[Any, ...]:
+        """One value per slot, as gymnasium's ``SyncVectorEnv.get_attr`` gives one per sub-environment (clients
+        written for memory-gym read ``max_episode_steps`` this way). Only what a slot's single environment would
+        report is answered: ``max_episode_steps`` (per slot), ``observation_space``, ``action_space``,
+        ``render_mode``."""
+        if name == "max_episode_steps":
+            return tuple(int(steps) for steps in self.max_episode_steps)
+        shared = {
+            "observation_space": self.single_observation_space,
+            "action_space": self.single_action_space,
+            "render_mode": self.render_mode,
+        }
+        if name not in shared:
+            valid = ", ".join(["max_episode_steps", *shared])
+            raise AttributeError(f"{self.core.env_name}'s slots report no attribute {name!r}: valid names are {valid}")
+        return (shared[name],) * self.num_envs
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
+        """``SyncVectorEnv.call`` for the attributes of :meth:`get_attr` (none of them is a method, so nothing takes
+        arguments)."""
+        if args or kwargs:
+            raise ValueError(f"call({name!r}) takes no arguments here: {name!r} is an attribute, not a method")
+        return self.get_attr(name)
+
     def reset(
         self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict]:

@@ -120,6 +120,27 @@ def test_vector_face_reports_one_figure_per_slot(env_id: str) -> None:
     assert vec.max_episode_steps.tolist()[2] == REFERENCE[env_id]
 
 
+@pytest.mark.parametrize("env_id", ["MortarMayhem-Grid-v0", "Endless-MysteryPath-v0"])
+def test_vector_face_answers_get_attr_and_call_like_sync_vector_env(env_id: str) -> None:
+    """A client written for memory-gym asks a vector env for its slots' figure with call/get_attr, as it would a
+    SyncVectorEnv of single envs; the native face gives the same tuples."""
+    options = NON_DEFAULT[env_id][0]
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make(env_id) for _ in range(3)])
+    vec = gym.make_vec(env_id, num_envs=3)
+    with pytest.raises(AttributeError, match="before its first reset"):
+        vec.call("max_episode_steps")
+    for env in (sync, vec):
+        env.reset(seed=0, options=options)
+    assert vec.call("max_episode_steps") == vec.get_attr("max_episode_steps") == sync.call("max_episode_steps")
+    assert vec.get_attr("max_episode_steps") == (expected(env_id, options),) * 3
+    for name in ("action_space", "observation_space", "render_mode"):
+        assert vec.get_attr(name) == sync.get_attr(name), name
+    with pytest.raises(AttributeError, match="valid names are max_episode_steps, observation_space"):
+        vec.get_attr("max_episode_stepz")
+    with pytest.raises(ValueError, match="takes no arguments"):
+        vec.call("max_episode_steps", 1)
+
+
 def run_to_the_end(env: gym.Env, seed: int, options: dict[str, Any], action: Any, limit: int = 5000) -> int:
     env.reset(seed=seed, options=options)
     for t in range(1, limit + 1):
