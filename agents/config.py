@@ -639,9 +639,13 @@ def _check_block(block: Any, prefix: str) -> None:
             slurm_minutes(block.time, f"{prefix}.time")
     elif isinstance(block, RunConfig):
         _choice(f"{prefix}.precision", block.precision, ("fp32", "bf16"))
-        device = block.device
-        if not (device == "cpu" or device == "cuda" or device.startswith("cuda:") and device[5:].isdigit()):
-            raise ConfigError(f"{prefix}.device={device!r} is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'")
+        if not is_device_name(block.device):
+            raise ConfigError(f"{prefix}.device={block.device!r} is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'")
+
+
+def is_device_name(name: str) -> bool:
+    """Whether ``name`` is a device this project runs on: ``cpu``, ``cuda`` or ``cuda:N``."""
+    return name == "cpu" or name == "cuda" or name.startswith("cuda:") and name[5:].isdigit()
 
 
 def _check_env(block: EnvConfig, prefix: str) -> None:

@@ -25,7 +25,7 @@ import torch
 import envs
 from agents.actor import Actor, Outcome
 from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
-from agents.config import Config, check_disjoint_seeds
+from agents.config import Config, check_disjoint_seeds, is_device_name
 from agents.io import atomic_write_bytes, atomic_write_text, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.models import ActorCritic
@@ -190,17 +190,18 @@ def describe_seeds(seed_range: Sequence[int]) -> str:
     return f"novel seeds {low}..{high} ({count} seed{'' if count == 1 else 's'})"
 
 
-def check_device(name: str) -> torch.device:
+def check_device(name: str, key: str = "device") -> torch.device:
     """``cpu``, ``cuda`` or ``cuda:N``, usable on this machine (torch itself would fail later, on a CPU-only build
-    with a bare AssertionError); a ValueError naming the device and the valid choices otherwise."""
-    if not (name == "cpu" or name == "cuda" or name.startswith("cuda:") and name[5:].isdigit()):
-        raise ValueError(f"device {name!r} is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'")
+    with a bare AssertionError); a ValueError naming ``key``, the device and the valid choices otherwise. Training
+    (``run.device``) and evaluation (``--device``) both check here."""
+    if not is_device_name(name):
+        raise ValueError(f"{key} {name!r} is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'")
     if name != "cpu":
         if not torch.cuda.is_available():
-            raise ValueError(f"device {name!r}, but CUDA is not available here; use 'cpu'")
+            raise ValueError(f"{key} {name!r}, but CUDA is not available here; use 'cpu'")
         count, index = torch.cuda.device_count(), int(name[5:] or 0)
         if index >= count:
-            raise ValueError(f"device {name!r}, but this machine has {count} CUDA device(s): cuda:0..cuda:{count - 1}")
+            raise ValueError(f"{key} {name!r}, but this machine has {count} CUDA device(s): cuda:0..cuda:{count - 1}")
     return torch.device(name)
 
 

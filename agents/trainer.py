@@ -52,7 +52,7 @@ from agents.checkpoint import (
     write_checkpoint,
 )
 from agents.config import Config, ConfigError, config_from_dict, config_to_dict, dump_config, parse_override
-from agents.evaluation import evaluate, read_records, record_means, seed_list, write_records
+from agents.evaluation import check_device, evaluate, read_records, record_means, seed_list, write_records
 from agents.io import atomic_write_text, now, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.ppo import explained_variance, gae_advantages, ppo_update
@@ -75,7 +75,7 @@ class Trainer:
             raise ValueError("this config has a grid: block; expand it with scripts/sweep.py, train.py runs one config")
         self.config = config
         self.run_dir = Path(run_dir)
-        self.device = _device(config.run.device)
+        self.device = check_device(config.run.device, "run.device")
         torch.set_num_threads(config.run.torch_threads or os.cpu_count() or 1)
         if self.device.type == "cpu":
             keep_freed_memory()
@@ -567,13 +567,6 @@ def keep_freed_memory() -> bool:
         libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
         and libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD_BYTES)
     )
-
-
-def _device(name: str) -> torch.device:
-    device = torch.device(name)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError(f"run.device={name!r} but CUDA is not available here; use run.device=cpu")
-    return device
 
 
 def run_info(config: Config) -> dict[str, Any]:
