@@ -173,13 +173,54 @@ class TrxlConfig:
 
 
 @dataclass
+class LruConfig:
+    """The Linear Recurrent Unit (``model.memory: lru``, agents/memory/lru.py): ``model.memory_layers`` residual blocks
+    of width ``model.memory_size``, each a complex diagonal linear recurrence."""
+
+    state_size: int = param(0, "complex state channels per block (0: model.memory_size)", low=0)
+    r_min: float = param(0.4, "smallest initial |lambda| (the stable-init ring's inner radius)", low=0.0, high=1.0)
+    r_max: float = param(0.99, "largest initial |lambda| (the ring's outer radius, < 1)", low=0.0, high=0.999999)
+    max_phase: float = param(6.283185307179586, "largest initial phase of lambda (radians)", low=0.0)
+
+
+@dataclass
+class FfmConfig:
+    """Fast and Forgetful Memory (``model.memory: ffm``, agents/memory/ffm.py): ``model.memory_layers`` residual
+    blocks of width ``model.memory_size``, each trace_size x context_size decaying, oscillating complex traces."""
+
+    trace_size: int = param(32, "gated input channels per block, each with context_size traces", low=1)
+    context_size: int = param(4, "traces per channel (decay and frequency learned per channel x context)", low=1)
+    max_horizon: float = param(1024.0, "longest initial time constant of a trace (steps)", low=1.0)
+
+
+@dataclass
+class MambaConfig:
+    """A selective state-space memory (``model.memory: mamba``, agents/memory/mamba.py): ``model.memory_layers``
+    residual Mamba blocks of width ``model.memory_size``, in pure PyTorch on the shared scan."""
+
+    state_size: int = param(16, "SSM states per inner channel (N)", low=1)
+    expand: int = param(2, "inner width = expand x memory_size", low=1)
+    conv_size: int = param(4, "steps of the causal depthwise convolution before the SSM (1: none)", low=1)
+    dt_rank: int = param(0, "rank of the step-size projection (0: ceil(memory_size / 16))", low=0)
+    dt_min: float = param(0.001, "smallest initial step size", low=1e-6)
+    dt_max: float = param(0.1, "largest initial step size", low=1e-6)
+
+
+@dataclass
 class ModelConfig:
     """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
 
     encoder: str = param("nature_cnn", "visual encoder (agents.models.ENCODERS)")
-    memory: str = param("gru", "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm, trxl")
-    memory_size: int = param(512, "hidden units of the recurrent layer", low=1)
-    memory_layers: int = param(1, "stacked recurrent layers", low=1)
+    memory: str = param(
+        "gru",
+        "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm, trxl, lru, ffm, mamba, or a class of your own "
+        "by import path, 'package.module:ClassName' (docs/memory.md)",
+    )
+    memory_size: int = param(512, "hidden units of the recurrent layer (the width of lru, ffm and mamba)", low=1)
+    memory_layers: int = param(1, "stacked recurrent layers (blocks of lru, ffm and mamba)", low=1)
+    memory_options: dict[str, Any] = param(
+        {}, "keyword arguments of a memory given by import path (its own hyperparameters)"
+    )
     hidden_size: int = param(512, "units of the body layer and of each of the policy and value streams", low=1)
     vector_encoder_size: int = param(
         128, "units of the encoder of vector inputs (vector obs, previous action/reward)", low=1
@@ -192,6 +233,9 @@ class ModelConfig:
     grayscale: bool = param(False, "turn images into one luma channel (ITU-R 601) before stacking")
     helm: HelmConfig = param(HelmConfig(), "the HELM branch (off unless helm.lm is set)")
     trxl: TrxlConfig = param(TrxlConfig(), "the Transformer-XL memory (used with memory: trxl)")
+    lru: LruConfig = param(LruConfig(), "the Linear Recurrent Unit (used with memory: lru)")
+    ffm: FfmConfig = param(FfmConfig(), "Fast and Forgetful Memory (used with memory: ffm)")
+    mamba: MambaConfig = param(MambaConfig(), "the selective state-space memory (used with memory: mamba)")
 
 
 @dataclass
@@ -308,7 +352,8 @@ class Config:
         if self.run.method:
             return self.run.method
         model = self.model
-        parts = [] if model.memory == "none" else [model.memory]
+        memory = model.memory.rpartition(":")[2]  # an import path is named by its class
+        parts = [] if memory == "none" else [memory]
         if model.frame_stack > 1:
             parts.append(f"stack{model.frame_stack}")
         if model.helm.enabled:
@@ -603,11 +648,28 @@ def _check_block(block: Any, prefix: str) -> None:
     if isinstance(block, EnvConfig):
         _check_env(block, prefix)
     elif isinstance(block, ModelConfig):
-        from agents.memory import MEMORY_MODULES  # the registries the model is built from
+        from agents.memory import MEMORY_MODULES, memory_class  # the registries the model is built from
         from agents.models import ENCODERS
 
         _choice(f"{prefix}.encoder", block.encoder, tuple(ENCODERS))
-        _choice(f"{prefix}.memory", block.memory, tuple(MEMORY_MODULES))
+        if ":" in block.memory:  # a memory of the user's own, by import path
+            try:
+                memory_class(block.memory)
+            except (ImportError, AttributeError, TypeError, ValueError) as err:
+                raise ConfigError(f"{prefix}.memory={block.memory!r}: {err}") from err
+        else:
+            _choice(f"{prefix}.memory", block.memory, tuple(MEMORY_MODULES))
+        if block.memory_options and ":" not in block.memory:
+            raise ConfigError(
+                f"{prefix}.memory_options={block.memory_options!r} is only for a memory given by import path; "
+                f"{block.memory!r} takes its settings from {prefix}.{block.memory} (when it has a block)"
+            )
+    elif isinstance(block, LruConfig):
+        if block.r_min > block.r_max:
+            raise ConfigError(f"{prefix}.r_min={block.r_min} is invalid: expected <= {prefix}.r_max={block.r_max}")
+    elif isinstance(block, MambaConfig):
+        if block.dt_min > block.dt_max:
+            raise ConfigError(f"{prefix}.dt_min={block.dt_min} is invalid: expected <= {prefix}.dt_max={block.dt_max}")
     elif isinstance(block, HelmConfig):
         if block.random_width % block.random_heads:
             raise ConfigError(

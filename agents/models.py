@@ -32,7 +32,7 @@ from torch.nn import functional as F
 
 from agents.config import ModelConfig
 from agents.layers import HIDDEN_GAIN, POLICY_GAIN, VALUE_GAIN, compute_dtype, orthogonal
-from agents.memory import MEMORY_MODULES, NoMemory, RecurrentMemory  # noqa: F401 (re-exported)
+from agents.memory import MEMORY_MODULES, NoMemory, RecurrentMemory, build_memory  # noqa: F401 (re-exported)
 
 
 @dataclass(frozen=True)
@@ -214,7 +214,7 @@ class ActorCritic(nn.Module):
                 orthogonal(nn.Linear(vector_size, config.vector_encoder_size), HIDDEN_GAIN), nn.ReLU()
             )
             feature_size += config.vector_encoder_size
-        self.memory = MEMORY_MODULES[config.memory](config, feature_size)
+        self.memory = build_memory(config, feature_size)
         hidden = config.hidden_size
         self.body = nn.Sequential(orthogonal(nn.Linear(self.memory.output_size, hidden), HIDDEN_GAIN), nn.ReLU())
         self.policy_stream = nn.Sequential(orthogonal(nn.Linear(hidden, hidden), HIDDEN_GAIN), nn.ReLU())

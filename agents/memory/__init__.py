@@ -20,15 +20,25 @@ memory is one new file here and one registry entry:
 * ``sequences(features, records, mask, episode_step)``: the training pass over the real steps of S padded sequences.
 * ``stateless``: no memory at all (every step is a sequence of its own).
 
-Families: :mod:`agents.memory.recurrent` (``none``, ``gru``, ``lstm``), :mod:`agents.memory.transformer` (``trxl``).
+Families: :mod:`agents.memory.recurrent` (``none``, ``gru``, ``lstm``), :mod:`agents.memory.transformer` (``trxl``),
+and the linear recurrences on the shared parallel scan (:mod:`agents.memory.scan`): :mod:`agents.memory.lru`
+(``lru``), :mod:`agents.memory.ffm` (``ffm``), :mod:`agents.memory.mamba` (``mamba``).
+
+A memory of the user's own needs no edit here: ``model.memory: "package.module:ClassName"`` imports a
+:class:`Memory` subclass, built as ``ClassName(input_size, model_config, **model.memory_options)``
+(:func:`build_memory`; a walk-through is in docs/memory.md).
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 
 from agents.config import ModelConfig
 from agents.memory.base import Memory
+from agents.memory.ffm import FFM
+from agents.memory.lru import LRU
+from agents.memory.mamba import Mamba
 from agents.memory.recurrent import NoMemory, RecurrentMemory
 from agents.memory.transformer import TransformerXL
 
@@ -38,6 +48,49 @@ MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], Memory]] = {
     "gru": lambda config, input_size: RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers),
     "lstm": lambda config, input_size: RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers),
     "trxl": lambda config, input_size: TransformerXL(config.trxl, input_size),
+    "lru": lambda config, input_size: LRU(config.lru, input_size, config.memory_size, config.memory_layers),
+    "ffm": lambda config, input_size: FFM(config.ffm, input_size, config.memory_size, config.memory_layers),
+    "mamba": lambda config, input_size: Mamba(config.mamba, input_size, config.memory_size, config.memory_layers),
 }
 
-__all__ = ["MEMORY_MODULES", "Memory", "NoMemory", "RecurrentMemory", "TransformerXL"]
+
+def memory_class(path: str) -> type[Memory]:
+    """The :class:`Memory` subclass named by an import path ``"package.module:ClassName"`` (the module is imported;
+    it must be importable from the working directory or ``PYTHONPATH``, in every process that trains, evaluates or
+    resumes the run)."""
+    module_name, _, attribute = path.partition(":")
+    if not module_name or not attribute:
+        raise ValueError(f"expected an import path 'package.module:ClassName', got {path!r}")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as err:
+        raise ImportError(f"cannot import module {module_name!r} ({err}); is it on PYTHONPATH?") from err
+    target: object = module
+    for part in attribute.split("."):
+        if not hasattr(target, part):
+            raise AttributeError(f"module {module_name!r} has no attribute {attribute!r}")
+        target = getattr(target, part)
+    if not (isinstance(target, type) and issubclass(target, Memory)):
+        raise TypeError(f"{path!r} is {target!r}, not a subclass of agents.memory.Memory")
+    return target
+
+
+def build_memory(config: ModelConfig, input_size: int) -> Memory:
+    """The memory of a model config: a registered name, or a class by import path."""
+    if ":" in config.memory:
+        return memory_class(config.memory)(input_size, config, **config.memory_options)
+    return MEMORY_MODULES[config.memory](config, input_size)
+
+
+__all__ = [
+    "FFM",
+    "LRU",
+    "MEMORY_MODULES",
+    "Mamba",
+    "Memory",
+    "NoMemory",
+    "RecurrentMemory",
+    "TransformerXL",
+    "build_memory",
+    "memory_class",
+]

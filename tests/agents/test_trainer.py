@@ -83,8 +83,24 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         ("model.memory=none", "model.frame_stack=4", "model.grayscale=true", "env.frame_skip=2"),
         ("model.memory=trxl", *TRXL, "ppo.sequence_length=3"),
         ("model.memory=trxl", *TRXL, "model.trxl.cache_dtype=bf16", "run.precision=bf16", "model.trxl.gating=true"),
+        ("model.memory=lru", "ppo.sequence_length=3", "model.memory_layers=2"),
+        ("model.memory=ffm", "ppo.sequence_length=max", "model.ffm.trace_size=4", "model.ffm.context_size=2"),
+        ("model.memory=mamba", "ppo.sequence_length=3", "model.mamba.state_size=4", "run.precision=bf16"),
+        ("model.memory=tests.support.external_memory:LeakyMemory", "model.memory_options={leak: 0.5}"),
     ],
-    ids=["gru-max", "lstm-3", "none", "gru-bf16", "stack4-gray-skip2", "trxl-3", "trxl-bf16-gated"],
+    ids=[
+        "gru-max",
+        "lstm-3",
+        "none",
+        "gru-bf16",
+        "stack4-gray-skip2",
+        "trxl-3",
+        "trxl-bf16-gated",
+        "lru-3-2layers",
+        "ffm-max",
+        "mamba-3-bf16",
+        "external-memory",
+    ],
 )
 def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overrides: tuple[str, ...]) -> None:
     """Killed after update 5 with checkpoints every 2: the resumed run ends with the same weights, TensorBoard

@@ -1,0 +1,64 @@
+"""Fast and Forgetful Memory (``model.memory: ffm``; Morad et al., NeurIPS 2023), on the shared scan.
+
+Per block: the layer-normed input u_t is projected to ``trace_size`` channels and gated, x_t = W u_t * sigmoid(G u_t);
+every channel j keeps ``context_size`` complex traces S_t[j, k] = gamma[j, k] * S_{t-1}[j, k] + x_t[j], with
+gamma = exp(-|alpha| + i omega): alpha sets how fast a trace forgets (initial time constants spread geometrically
+from 1 to ``max_horizon`` steps over the channels), omega how it oscillates (initial frequencies spread over
+[0, pi/2] over the contexts), both learned per channel x context. The traces' real and imaginary parts go through a
+linear layer and a LayerNorm to the block's width, mixed with a skip path of u by an output gate:
+y = z * sigmoid(O u) + (K u) * (1 - sigmoid(O u)), added to the block's input. The state is S, stored as
+(real, imaginary).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from agents.config import FfmConfig
+from agents.layers import orthogonal
+from agents.memory.scan import ScanMemory, complex_dtype, linear_scan, widen
+
+
+class FFMBlock(nn.Module):
+    """One residual FFM block of width ``dim``."""
+
+    def __init__(self, dim: int, config: FfmConfig) -> None:
+        super().__init__()
+        traces, contexts = config.trace_size, config.context_size
+        self.shape = (traces, contexts)
+        self.state_size = 2 * traces * contexts
+        horizons = torch.logspace(0, math.log10(config.max_horizon), traces)  # steps until a trace fades to 1/e
+        self.alpha = nn.Parameter((1.0 / horizons).unsqueeze(1).repeat(1, contexts))
+        self.omega = nn.Parameter(torch.linspace(0, math.pi / 2, contexts).unsqueeze(0).repeat(traces, 1))
+        self.norm = nn.LayerNorm(dim)
+        self.project = orthogonal(nn.Linear(dim, 2 * traces), 1.0)  # the trace input and its gate
+        self.mix = nn.Sequential(orthogonal(nn.Linear(self.state_size, dim), 1.0), nn.LayerNorm(dim))
+        self.skip_gate = orthogonal(nn.Linear(dim, 2 * dim), 1.0)  # the skip path and the output gate
+
+    def decay(self) -> Tensor:
+        """gamma (trace_size, context_size), complex, |gamma| <= 1."""
+        return torch.exp(torch.complex(-self.alpha.abs(), self.omega))
+
+    def forward(self, x: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
+        u = self.norm(x)
+        value, gate = widen(self.project(u)).chunk(2, dim=-1)
+        inputs = (value * torch.sigmoid(gate)).unsqueeze(-1).expand(*value.shape, self.shape[1])  # (S, T, m, c)
+        start = torch.view_as_complex(widen(state).reshape(-1, *self.shape, 2).contiguous())
+        dtype = complex_dtype(value.dtype)
+        traces = linear_scan(self.decay().to(dtype).view(1, 1, *self.shape), inputs.to(dtype), start)
+        s, t = traces.shape[:2]
+        z = self.mix(torch.view_as_real(traces).reshape(s, t, self.state_size).to(x.dtype))
+        skip, out_gate = self.skip_gate(u).chunk(2, dim=-1)
+        out_gate = torch.sigmoid(out_gate)
+        final = torch.view_as_real(traces[:, -1]).reshape(-1, self.state_size)
+        return x + z * out_gate + skip * (1 - out_gate), final
+
+
+class FFM(ScanMemory):
+    """``layers`` FFM blocks of width ``dim`` (the model's ``memory_size``)."""
+
+    def __init__(self, config: FfmConfig, input_size: int, dim: int, layers: int) -> None:
+        super().__init__(input_size, dim, [FFMBlock(dim, config) for _ in range(layers)])

@@ -1,0 +1,80 @@
+"""A selective state-space memory (``model.memory: mamba``; Gu and Dao 2023's Mamba block), in pure PyTorch on the
+shared scan.
+
+Per block: the layer-normed input goes to two branches of width E = expand * dim. The main branch passes a causal
+depthwise convolution over the last ``conv_size`` steps and SiLU, then a selective SSM: per step, the step size
+Delta = softplus(W_dt (W_delta x) + b_dt) (E,) and B, C (``state_size``,) are functions of the input, and every
+channel e keeps ``state_size`` states h_t[e, n] = exp(Delta_t[e] A[e, n]) h_{t-1}[e, n] + Delta_t[e] B_t[n] x_t[e],
+read out as y_t[e] = sum_n C_t[n] h_t[e, n] + D[e] x_t[e]. A = -exp(A_log) stays negative (every state decays);
+A starts at -(1..state_size) per channel and b_dt so that Delta starts log-uniform in [dt_min, dt_max] (the Mamba
+initialisation). The output is gated by SiLU of the second branch, projected back to the block's width and added to
+its input.
+
+State per block: the convolution's last ``conv_size - 1`` inputs (conv_size - 1, E) and the SSM's h (E, state_size),
+flattened into one vector, zeros at an episode start (a convolution over zero-padded steps before the episode).
+``mamba-ssm``'s CUDA kernels are not needed and not used: the recurrence is the shared scan on every device.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+from torch.nn import functional as F
+
+from agents.config import MambaConfig
+from agents.layers import orthogonal
+from agents.memory.scan import ScanMemory, linear_scan, widen
+
+
+class MambaBlock(nn.Module):
+    """One residual Mamba block of width ``dim``."""
+
+    def __init__(self, dim: int, config: MambaConfig) -> None:
+        super().__init__()
+        inner, states, kernel = config.expand * dim, config.state_size, config.conv_size
+        rank = config.dt_rank or math.ceil(dim / 16)
+        self.inner, self.states, self.kernel, self.rank = inner, states, kernel, rank
+        self.conv_size = (kernel - 1) * inner
+        self.state_size = self.conv_size + inner * states
+        self.norm = nn.LayerNorm(dim)
+        self.project_in = orthogonal(nn.Linear(dim, 2 * inner, bias=False), 1.0)
+        self.conv = nn.Conv1d(inner, inner, kernel, groups=inner)  # applied to (k - 1) earlier steps + the sequence
+        self.select = nn.Linear(inner, rank + 2 * states, bias=False)  # Delta's low-rank input, B and C
+        self.step_size = nn.Linear(rank, inner)
+        step = torch.exp(
+            torch.rand(inner) * (math.log(config.dt_max) - math.log(config.dt_min)) + math.log(config.dt_min)
+        )
+        with torch.no_grad():
+            self.step_size.bias.copy_(step + torch.log(-torch.expm1(-step)))  # softplus^-1(step)
+        self.a_log = nn.Parameter(torch.log(torch.arange(1, states + 1, dtype=torch.float32)).repeat(inner, 1))
+        self.skip = nn.Parameter(torch.ones(inner))
+        self.project_out = orthogonal(nn.Linear(inner, dim, bias=False), 1.0)
+
+    def forward(self, x: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
+        s, t, _ = x.shape
+        main, gate = self.project_in(self.norm(x)).chunk(2, dim=-1)
+        past = state[:, : self.conv_size].reshape(s, self.kernel - 1, self.inner).to(main.dtype)
+        window = torch.cat((past, main), dim=1)  # (S, k - 1 + T, E)
+        main = F.silu(self.conv(window.transpose(1, 2)).transpose(1, 2))  # (S, T, E)
+        delta, b, c = self.select(main).split((self.rank, self.states, self.states), dim=-1)
+        step = widen(F.softplus(self.step_size(delta)))  # (S, T, E)
+        decay = torch.exp(step.unsqueeze(-1) * -torch.exp(self.a_log.to(step.dtype)))  # (S, T, E, N)
+        wide = widen(main)
+        inputs = (step * wide).unsqueeze(-1) * widen(b).unsqueeze(2)  # (S, T, E, N)
+        start = widen(state[:, self.conv_size :].reshape(s, self.inner, self.states))
+        h = linear_scan(decay, inputs, start)
+        y = (h @ widen(c).unsqueeze(-1)).squeeze(-1) + self.skip * wide  # C h + D x
+        y = self.project_out((y * F.silu(widen(gate))).to(x.dtype))
+        final = torch.cat(
+            (window[:, t:].reshape(s, self.conv_size).to(state.dtype), h[:, -1].reshape(s, -1).to(state.dtype)), dim=1
+        )
+        return x + y, final
+
+
+class Mamba(ScanMemory):
+    """``layers`` Mamba blocks of width ``dim`` (the model's ``memory_size``)."""
+
+    def __init__(self, config: MambaConfig, input_size: int, dim: int, layers: int) -> None:
+        super().__init__(input_size, dim, [MambaBlock(dim, config) for _ in range(layers)])

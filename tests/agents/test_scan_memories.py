@@ -1,0 +1,216 @@
+"""The parallel scan (agents/memory/scan.py) against a step-by-step loop, the memories built on it (lru, ffm, mamba),
+and a memory of the user's own by import path."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from agents.config import ConfigError, ModelConfig, config_from_dict
+from agents.memory import build_memory, memory_class
+from agents.memory.scan import linear_scan, reference_scan
+from agents.trainer import Trainer
+from tests.support.external_memory import LeakyMemory
+
+SCAN_MEMORIES = ("lru", "ffm", "mamba")
+
+
+def _scan_inputs(s: int, t: int, d: int, complex_: bool, seed: int = 0) -> tuple[torch.Tensor, ...]:
+    generator = torch.Generator().manual_seed(seed)
+    a = torch.rand(s, t, d, generator=generator, dtype=torch.float64)
+    if complex_:
+        a = a * torch.exp(1j * 3 * torch.rand(s, t, d, generator=generator, dtype=torch.float64))
+    dtype = a.dtype
+    b = torch.randn(s, t, d, generator=generator, dtype=torch.float64).to(dtype)
+    start = torch.randn(s, d, generator=generator, dtype=torch.float64).to(dtype)
+    reset = torch.rand(s, t, generator=generator) < 0.1
+    return a, b, start, reset
+
+
+@pytest.mark.parametrize("complex_", [False, True], ids=["real", "complex"])
+@pytest.mark.parametrize("length", [1, 2, 5, 16, 17, 63, 200])
+def test_scan_equals_the_step_by_step_loop_in_values_and_gradients(length: int, complex_: bool) -> None:
+    """Every length (chunk boundaries, padding of the last chunk), start states and resets inside the sequences."""
+    a, b, start, reset = (
+        x.requires_grad_(x.is_floating_point() or x.is_complex()) for x in _scan_inputs(3, length, 4, complex_)
+    )
+    weights = torch.randn(3, length, 4, dtype=torch.float64)
+    fast, slow = linear_scan(a, b, start, reset), reference_scan(a, b, start, reset)
+    torch.testing.assert_close(fast, slow, rtol=1e-12, atol=1e-12)
+    grads = [
+        torch.autograd.grad(
+            (y.real * weights).sum() + (y.imag * weights).sum() if complex_ else (y * weights).sum(), (a, b, start)
+        )
+        for y in (fast, slow)
+    ]
+    for fast_grad, slow_grad in zip(*grads, strict=True):
+        torch.testing.assert_close(fast_grad, slow_grad, rtol=1e-10, atol=1e-12)
+
+
+def test_scan_gradients_pass_gradcheck() -> None:
+    a, b, start, reset = _scan_inputs(2, 11, 3, complex_=True, seed=1)
+    inputs = tuple(x.requires_grad_() for x in (a, b, start))
+    assert torch.autograd.gradcheck(lambda a, b, h: linear_scan(a, b, h, reset), inputs)
+
+
+def test_a_reset_makes_the_sequence_independent_of_everything_before() -> None:
+    a, b, start, _ = _scan_inputs(2, 30, 4, complex_=False)
+    reset = torch.zeros(2, 30, dtype=torch.bool)
+    reset[:, 12] = True
+    h = linear_scan(a, b, start, reset)
+    other = b.clone()
+    other[:, :12] += 5.0
+    h_other = linear_scan(a, other, -start, reset)
+    assert not torch.allclose(h[:, :12], h_other[:, :12])
+    torch.testing.assert_close(h[:, 12:], h_other[:, 12:], rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("length", [4096, 20_000])
+def test_long_fp32_scans_neither_overflow_nor_drift(length: int) -> None:
+    """fp32 over thousands of steps, decays from vanishing (1e-30) to nearly one (|a| = 1 - 1e-6), complex and real:
+    finite, and within 1e-4 of the float64 loop (a closed form through b / prod(a) would overflow here)."""
+    generator = torch.Generator().manual_seed(0)
+    magnitude = torch.tensor([1e-30, 0.5, 0.99, 0.9999, 1 - 1e-6], dtype=torch.float64)
+    phase = torch.exp(1j * torch.rand(1, length, 5, generator=generator, dtype=torch.float64))
+    a = (magnitude * phase).expand(2, length, 5)
+    b = torch.randn(2, length, 5, generator=generator, dtype=torch.float64).to(a.dtype)
+    expected = reference_scan(a, b)
+    for decays, inputs, truth in ((a, b, expected), (a.abs(), b.real, reference_scan(a.abs(), b.real))):
+        got = linear_scan(
+            decays.to(torch.complex64 if decays.is_complex() else torch.float32),
+            inputs.to(torch.complex64 if inputs.is_complex() else torch.float32),
+        )
+        assert torch.isfinite(torch.view_as_real(got) if got.is_complex() else got).all()
+        scale = truth.abs().amax(dim=1, keepdim=True)
+        assert ((got.to(truth.dtype) - truth).abs() / scale).max() < 1e-4
+
+
+def _sequence_batch(memory: torch.nn.Module, features: int, lengths: list[int], seed: int):
+    generator = torch.Generator().manual_seed(seed)
+    mask = torch.zeros(len(lengths), max(lengths), dtype=torch.bool)
+    for row, length in enumerate(lengths):
+        mask[row, :length] = True
+    steps = torch.randn(int(mask.sum()), features, generator=generator, dtype=torch.float64)
+    start = 0.5 * torch.randn(len(lengths), *memory.state_shape, generator=generator, dtype=torch.float64)
+    start[1] = 0  # one sequence at an episode start
+    return steps, start, mask
+
+
+@pytest.mark.parametrize("name", [*SCAN_MEMORIES, "tests.support.external_memory:LeakyMemory"])
+def test_step_by_step_equals_the_sequence_path(name: str) -> None:
+    """Random sequences of random lengths (trailing padding), random start states: the rollout's one-step path and
+    the training pass give the same outputs, and gradients reach every parameter."""
+    torch.manual_seed(0)
+    config = ModelConfig(memory=name, memory_size=24, memory_layers=2)
+    memory = build_memory(config, 10).double()
+    steps, start, mask = _sequence_batch(memory, 10, [9, 6, 1, 4], seed=1)
+    sequence_output = memory.sequences(steps, start, mask)
+    padded = torch.zeros(*mask.shape, 10, dtype=torch.float64).index_put((mask,), steps)
+    state, outputs = start, []
+    for t in range(mask.shape[1]):
+        output, state = memory.step(padded[:, t], state)
+        outputs.append(output)
+    torch.testing.assert_close(sequence_output, torch.stack(outputs, dim=1)[mask], rtol=1e-10, atol=1e-10)
+    sequence_output.square().sum().backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad).all() for p in memory.parameters())
+    assert all(p.grad.abs().sum() > 0 for p in memory.parameters())
+
+
+@pytest.mark.parametrize("name", SCAN_MEMORIES)
+def test_the_state_carries_across_truncated_sequences(name: str) -> None:
+    """A sequence cut in two, the second half started from the state the first half ended with (what the buffer
+    stores), gives the outputs of the uncut sequence; and a zero state is an episode start (the padding before it is
+    never seen)."""
+    torch.manual_seed(0)
+    memory = build_memory(ModelConfig(memory=name, memory_size=16), 6).double()
+    steps = torch.randn(1, 12, 6, dtype=torch.float64)
+    full, _ = memory.run(steps, memory.initial_state(1, "cpu").double())
+    first, state = memory.run(steps[:, :5], memory.initial_state(1, "cpu").double())
+    second, _ = memory.run(steps[:, 5:], state)
+    torch.testing.assert_close(torch.cat((first, second), dim=1), full, rtol=1e-10, atol=1e-10)
+
+
+def test_lru_decays_stay_inside_the_unit_circle_on_the_init_ring() -> None:
+    config = ModelConfig(memory="lru", memory_size=32)
+    config.lru.r_min, config.lru.r_max = 0.5, 0.9
+    decay = build_memory(config, 4).blocks[0].decay()
+    assert decay.abs().min() >= 0.5 - 1e-6 and decay.abs().max() <= 0.9 + 1e-6
+
+
+def test_mamba_keeps_its_convolution_window_in_the_state() -> None:
+    """The state holds the convolution's last conv_size - 1 inputs: with the SSM's part of the state zeroed, the next
+    output still depends on the input 3 steps back (conv 4), and no longer once the window is zeroed too."""
+    torch.manual_seed(0)
+    memory = build_memory(ModelConfig(memory="mamba", memory_size=8), 4).double()
+    block = memory.blocks[0]
+    assert block.state_size == 3 * 16 + 16 * 16 and memory.state_shape == (1, block.state_size)
+    steps = torch.randn(1, 5, 4, dtype=torch.float64)
+    changed = steps.clone()
+    changed[:, 1] += 1.0
+
+    def last_output(sequence: torch.Tensor, keep_window: bool) -> torch.Tensor:
+        _, state = memory.run(sequence[:, :4], memory.initial_state(1, "cpu").double())
+        state[:, :, block.conv_size :] = 0  # the SSM's states
+        if not keep_window:
+            state[:, :, : block.conv_size] = 0
+        return memory.run(sequence[:, 4:], state)[0]
+
+    assert not torch.allclose(last_output(steps, True), last_output(changed, True))
+    torch.testing.assert_close(last_output(steps, False), last_output(changed, False), rtol=0, atol=0)
+
+
+def test_an_import_path_memory_is_built_with_its_options() -> None:
+    config = ModelConfig(
+        memory="tests.support.external_memory:LeakyMemory", memory_size=8, memory_options={"leak": 0.25}
+    )
+    memory = build_memory(config, 5)
+    assert isinstance(memory, LeakyMemory) and memory.leak == 0.25 and memory.output_size == 8
+    assert memory_class("tests.support.external_memory:LeakyMemory") is LeakyMemory
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("tests.support.no_such_module:Memory", "cannot import module 'tests.support.no_such_module'"),
+        ("tests.support.external_memory:Missing", "has no attribute 'Missing'"),
+        ("tests.support.external_memory:ModelConfig", "not a subclass of agents.memory.Memory"),
+        ("tests.support.external_memory:", "expected an import path"),
+    ],
+)
+def test_a_bad_import_path_names_the_key(value: str, message: str) -> None:
+    with pytest.raises(ConfigError, match="model.memory=") as error:
+        config_from_dict({"model": {"memory": value}})
+    assert message in str(error.value)
+
+
+def test_memory_options_without_an_import_path_are_refused() -> None:
+    with pytest.raises(ConfigError, match=r"model.memory_options=.*only for a memory given by import path"):
+        config_from_dict({"model": {"memory": "gru", "memory_options": {"leak": 0.5}}})
+
+
+def test_an_external_memory_trains_evaluates_and_names_its_runs(tmp_path: Path) -> None:
+    """The memory outside agents/ trains end to end through the one trainer (and evaluates through its actor); its
+    method name is the class's."""
+    raw = {
+        "env": {"id": "ProofOfMemory-v0", "options": {"delay": 2}},
+        "model": {
+            "memory": "tests.support.external_memory:LeakyMemory",
+            "memory_size": 16,
+            "hidden_size": 16,
+            "memory_options": {"leak": 0.8},
+        },
+        "ppo": {"epochs": 1, "minibatches": 2},
+        "run": {"total_steps": 2 * 4 * 16, "workers": 4, "worker_steps": 16, "progress_bar": False, "torch_threads": 1},
+        "eval": {"interval": 2, "seeds": [100000, 100002], "repetitions": 1},
+    }
+    config = config_from_dict(raw)
+    assert config.method == "LeakyMemory"
+    trainer = Trainer(config, tmp_path)
+    history = trainer.train()
+    assert len(history) == 2 and np.isfinite(history[-1]["losses/policy_loss"])
+    assert isinstance(trainer.model.memory, LeakyMemory) and trainer.model.memory.leak == 0.8
+    with open(tmp_path / "eval" / "episodes.csv") as records:
+        assert len(records.readlines()) == 1 + 3 * 1  # the header and 3 seeds x 1 repetition at update 2
