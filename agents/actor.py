@@ -217,10 +217,17 @@ class Actor:
     def load_state(self, state: dict[str, Any], seed_source: SeedSource | None = None) -> None:
         """Rebuild every slot from :meth:`state`: reset with its seed and replay its actions. The replays end together
         (a slot with a shorter episode starts later), so every step of the HELM branch sees the whole batch as it did
-        when the steps were first taken; the slots not started yet are cleared when they start."""
+        when the steps were first taken; the slots not started yet are cleared when they start.
+
+        A core that is not ``replayable`` (a gymnasium environment's copies) cannot rebuild the episodes in progress:
+        every slot starts a new episode with the next seeds of ``seed_source`` instead (deterministic, since the
+        seed generator is restored first, but not what an uninterrupted run would have played)."""
         self.seed_source = seed_source
         seeds, actions = state["seeds"], state["actions"]
         self.active[:] = True
+        if not self.core.replayable:  # the episodes in progress cannot be rebuilt: new ones, with the next seeds
+            self._reset(np.arange(self.num_envs), seed_source(self.num_envs) if seed_source else seeds)
+            return
         slots = np.arange(self.num_envs)
         self.core.reset_slots(slots, [int(s) for s in seeds])
         self._clear(slots, seeds)

@@ -177,9 +177,7 @@ def load_policy(
         raise FileNotFoundError(f"{run_dir} holds no checkpoint (checkpoints/{CHECKPOINT_GLOB})")
     state = read_checkpoint(path)
     check_checkpoint_config(state, config, path)
-    import envs
-
-    spec_core = envs.make_core(config.env.id, 1, config.env.options)
+    spec_core = config.env.make_core(1)
     model, helm = build_agent(config, spec_core.single_observation_space, spec_core.single_action_space, device)
     check_helm(helm, state, path)
     model.load_state_dict(state["model"])

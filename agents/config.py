@@ -114,15 +114,54 @@ class Schedule:
 
 
 @dataclass
-class EnvConfig:
-    """Which environment to train on and how its episodes are seeded."""
+class MetricConfig:
+    """The task's metric when the metric table (agents/metrics.py) has none for the env id, or to replace it: an
+    entry of the final info (e.g. a success flag), with its plot label and range. Empty key: the table's metric, or
+    the episode return for an id it does not know."""
 
-    id: str = param("ProofOfMemory-v0", "environment id (see envs.ENV_IDS)")
+    key: str = param("", "final-info entry that is the task's metric (empty: the table's, else the return)")
+    label: str = param("", "axis label of plots (empty: the key)")
+    low: float | None = param(None, "smallest value the metric takes (null: unbounded)")
+    high: float | None = param(None, "largest value the metric takes (null: unbounded)")
+
+
+@dataclass
+class EnvConfig:
+    """Which environment to train on and how its episodes are seeded. Besides this project's ids (envs.ENV_IDS, run
+    as natively batched cores), any gymnasium id works: a registered one or "module:EnvId" (see docs/gymnasium.md)."""
+
+    id: str = param("ProofOfMemory-v0", "environment id: envs.ENV_IDS, a gymnasium id or 'module:EnvId'")
     options: dict[str, Any] = param({}, "reset options of the environment (its own names and ranges)")
     train_seeds: list[int] = param([0, 99_999], "inclusive range [low, high] that episode seeds are drawn from")
     frame_skip: int = param(
         1, "env steps per decision: the action is repeated, rewards summed, an episode end stops the repeat", low=1
     )
+    make_kwargs: dict[str, Any] = param({}, "keyword arguments of gymnasium.make (gymnasium environments)")
+    wrappers: list[Any] = param(
+        [], "wrappers applied in order to each copy: 'module:Wrapper' or {path: 'module:Wrapper', kwargs: {...}}"
+    )
+    vectorization: str = param("sync", "how a gymnasium environment's copies run: 'sync' (one process) or 'async'")
+    image_layout: str = param("hwc", "layout of a gymnasium environment's uint8 image: 'hwc' or 'chw'")
+    check_seeding: bool = param(True, "refuse a gymnasium environment whose reset ignores the seed (false: warn)")
+    metric: MetricConfig = param(MetricConfig(), "the task's metric: an entry of the final info (see MetricConfig)")
+
+    def make_core(self, num_envs: int) -> Any:
+        """The batched core of this environment with ``num_envs`` slots (a GymnasiumCore for gymnasium ids)."""
+        return envs.make_core(
+            self.id,
+            num_envs,
+            self.options,
+            make_kwargs=self.make_kwargs,
+            wrappers=self.wrappers,
+            vectorization=self.vectorization,
+            image_layout=self.image_layout,
+            check_seeding=self.check_seeding,
+        )
+
+    @property
+    def native(self) -> bool:
+        """Whether this runs as one of this project's own cores (its options have specs and defaults)."""
+        return self.id in envs.ENV_IDS and not self.make_kwargs and not self.wrappers
 
 
 @dataclass
@@ -210,7 +249,7 @@ class MambaConfig:
 class ModelConfig:
     """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
 
-    encoder: str = param("nature_cnn", "visual encoder (agents.models.ENCODERS)")
+    encoder: str = param("nature_cnn", "observation encoder (agents.models.ENCODERS): nature_cnn (images) or mlp")
     memory: str = param(
         "gru",
         "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm, trxl, lru, ffm, mamba, or a class of your own "
@@ -224,6 +263,9 @@ class ModelConfig:
     hidden_size: int = param(512, "units of the body layer and of each of the policy and value streams", low=1)
     vector_encoder_size: int = param(
         128, "units of the encoder of vector inputs (vector obs, previous action/reward)", low=1
+    )
+    mlp_sizes: list[int] = param(
+        [64, 64], "hidden layers of the MLP that encodes vector observations (encoder: mlp), e.g. [64, 64]"
     )
     previous_action: bool = param(False, "feed the previous action (one-hot per branch, zeros at reset)")
     previous_reward: bool = param(False, "feed the previous reward (zero at reset)")
@@ -394,6 +436,8 @@ _RESOLVED: dict[tuple[str, str], tuple[dict[str, Any], dict[str, Any]]] = {}  # 
 def resolved_options(env_id: str, options: Mapping[str, Any] | None = None, changed_only: bool = False) -> dict:
     """The reset options of ``env_id`` with ``options`` applied, validated and canonical (a float option as a float,
     so that ``1`` and ``1.0`` agree); ``changed_only``: only those that differ from the environment's defaults."""
+    if env_id not in envs.ENV_IDS:  # a gymnasium environment: its reset options are its own, without known defaults
+        return _deep_copy(dict(options or {}))
     key = (env_id, json.dumps(dict(options or {}), sort_keys=True, default=repr))
     if key not in _RESOLVED:  # one-slot cores know their variant's specs and defaults; built once per option set
         default = envs.make_core(env_id, 1)
@@ -421,6 +465,8 @@ def task_name(env_id: str, options: Mapping[str, Any] | None = None) -> str:
     digits and ``_.+=-``: a valid CSV field and file name. A name longer than :data:`MAX_TASK_NAME` becomes
     ``env_id+options=<12 hex digits of the SHA-256 of the options as sorted JSON>``."""
     changed = resolved_options(env_id, options, changed_only=True)
+    if env_id not in envs.ENV_IDS:  # "module:EnvId", "Namespace/Env-v0": the id without module, other characters as _
+        env_id = re.sub(r"[^A-Za-z0-9_.+=-]", "_", env_id.rpartition(":")[2]).lstrip("_.+=-") or "env"
     if not changed:
         return env_id
     name = env_id + "".join(f"+{key}={_option_text(changed[key])}" for key in sorted(changed))
@@ -652,6 +698,10 @@ def _check_block(block: Any, prefix: str) -> None:
         from agents.models import ENCODERS
 
         _choice(f"{prefix}.encoder", block.encoder, tuple(ENCODERS))
+        if not block.mlp_sizes or any(size < 1 for size in block.mlp_sizes):
+            raise ConfigError(
+                f"{prefix}.mlp_sizes={block.mlp_sizes!r} is invalid: expected a non-empty list of ints >= 1"
+            )
         if ":" in block.memory:  # a memory of the user's own, by import path
             try:
                 memory_class(block.memory)
@@ -711,16 +761,45 @@ def is_device_name(name: str) -> bool:
 
 
 def _check_env(block: EnvConfig, prefix: str) -> None:
-    if block.id not in envs.ENV_IDS:
-        ids = list(envs.ENV_IDS)
-        close = difflib.get_close_matches(block.id, ids, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ConfigError(f"{prefix}.id={block.id!r} is unknown{hint}; valid ids: {', '.join(ids)}")
-    try:  # a one-slot core validates the options exactly as training will (families differ per variant)
-        envs.make_core(block.id, 1, block.options)
-    except ValueError as err:
-        raise ConfigError(f"{prefix}.options: {err}") from err
+    from envs.gymnasium_core import IMAGE_LAYOUTS, VECTORIZATIONS
+
+    _choice(f"{prefix}.vectorization", block.vectorization, VECTORIZATIONS)
+    _choice(f"{prefix}.image_layout", block.image_layout, IMAGE_LAYOUTS)
+    if block.native:
+        try:  # a one-slot core validates the options exactly as training will (families differ per variant)
+            envs.make_core(block.id, 1, block.options)
+        except ValueError as err:
+            raise ConfigError(f"{prefix}.options: {err}") from err
+    else:
+        _check_gymnasium_env(block, prefix)
     _seed_range(f"{prefix}.train_seeds", block.train_seeds)
+
+
+_GYMNASIUM_CHECKED: dict[str, str] = {}  # settings -> "" (valid) or the error: one probe environment per setting
+
+
+def _check_gymnasium_env(block: EnvConfig, prefix: str) -> None:
+    """That gymnasium makes the environment, its wrappers apply and its spaces are ones the model takes (one
+    environment is made, in this process, and closed)."""
+    from envs.gymnasium_core import UnknownEnvironmentError
+
+    key = json.dumps([block.id, block.make_kwargs, block.wrappers, block.image_layout], sort_keys=True, default=repr)
+    if key not in _GYMNASIUM_CHECKED:
+        try:
+            core = envs.make_core(
+                block.id, 1, make_kwargs=block.make_kwargs, wrappers=block.wrappers, image_layout=block.image_layout
+            )
+            core.close()
+            _GYMNASIUM_CHECKED[key] = ""
+        except UnknownEnvironmentError as err:
+            ids = list(envs.ENV_IDS)
+            close = difflib.get_close_matches(block.id, ids, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            _GYMNASIUM_CHECKED[key] = f"{prefix}.id={block.id!r} is unknown{hint}: {err}"
+        except (ValueError, TypeError, ImportError) as err:
+            _GYMNASIUM_CHECKED[key] = f"{prefix}: {block.id} cannot be used: {err}"
+    if _GYMNASIUM_CHECKED[key]:
+        raise ConfigError(_GYMNASIUM_CHECKED[key])
 
 
 def _seed_range(key: str, seeds: list[int], allow_empty: bool = False) -> None:

@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 import torch
 
-import envs
 from agents.actor import Actor, Outcome
 from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
 from agents.config import Config, check_disjoint_seeds, is_device_name
@@ -57,7 +56,7 @@ def evaluate(
     seed then repetition. ``core``: a batched core with ``len(seeds) * repetitions`` slots to reuse."""
     slots = len(seeds) * repetitions
     if core is None:
-        core = envs.make_core(config.env.id, slots, config.env.options)
+        core = config.env.make_core(slots)
     elif core.num_envs != slots:
         raise ValueError(f"the core has {core.num_envs} slots, the evaluation needs {slots}")
     generator = torch.Generator(device=device)
@@ -78,7 +77,7 @@ def evaluate(
             on_frame(actor, outcome)
     if bar is not None:
         bar.close()
-    metric = metric_of(config.env.id)
+    metric = metric_of(config.env.id, config.env.metric)
     options, digest = env_options_text(config), config_digest(config, greedy)  # the columns agents.results checks
     records = []
     for slot in range(slots):

@@ -101,6 +101,24 @@ METRICS: dict[str, Metric] = {
 }
 
 
-def metric_of(env_id: str) -> Metric:
-    """The metric of ``env_id``; an id without one in the table is scored by its return."""
-    return METRICS.get(env_id, Metric("return", "Return", _key("reward"), _key("reward")))
+RETURN = Metric("return", "Return", _key("reward"), _key("reward"))
+
+
+def metric_of(env_id: str, custom: Any = None) -> Metric:
+    """The metric of ``env_id``; an id without one in the table is scored by its return. ``custom``: the config's
+    ``env.metric`` (``key``, ``label``, ``low``, ``high``); with a key, that entry of the final info is the metric."""
+    if custom is not None and custom.key:
+        value = _info_entry(custom.key, env_id)
+        return Metric(custom.key, custom.label or custom.key, value, value, custom.low, custom.high)
+    return METRICS.get(env_id, RETURN)
+
+
+def _info_entry(name: str, env_id: str) -> Callable[[Info], float]:
+    def value(info: Info) -> float:
+        if name not in info:
+            raise ValueError(
+                f"env.metric.key={name!r} is not in the final info of {env_id}; its entries: {', '.join(sorted(info))}"
+            )
+        return float(info[name])
+
+    return value

@@ -57,22 +57,29 @@ OBSERVATION_KEYS = {"visual_observation": "image", "vector_observation": "vector
 
 def observation_fields(observation_space: gym.Space, grayscale: bool = False) -> dict[str, InputField]:
     """One step's observation as model inputs, before stacking: ``image`` uint8 (H, W, C), one luma channel with
-    ``grayscale``, and ``vector`` float32 (D,) when the observation has a vector part."""
+    ``grayscale``, when the observation has an image, and ``vector`` float32 (D,) when it has a vector part (a
+    gymnasium environment's observation arrives in this form: envs.gymnasium_core)."""
     if isinstance(observation_space, gym.spaces.Dict):
         unknown = set(observation_space.spaces) - set(OBSERVATION_KEYS)
-        if unknown or "visual_observation" not in observation_space.spaces:
+        if unknown or not observation_space.spaces:
             raise ValueError(
                 f"unsupported Dict observation keys {sorted(observation_space.spaces)}: expected "
-                "'visual_observation' and optionally 'vector_observation'"
+                "'visual_observation' and/or 'vector_observation'"
             )
-        image_space = observation_space["visual_observation"]
+        image_space = observation_space.spaces.get("visual_observation")
         vector_space = observation_space.spaces.get("vector_observation")
     else:
         image_space, vector_space = observation_space, None
-    if not (isinstance(image_space, gym.spaces.Box) and image_space.dtype == np.uint8 and len(image_space.shape) == 3):
-        raise ValueError(f"unsupported image space {image_space}: expected a uint8 Box of shape (H, W, C)")
-    height, width, channels = image_space.shape
-    fields = {"image": InputField((height, width, 1 if grayscale else channels), torch.uint8)}
+    fields = {}
+    if image_space is not None:
+        if not (
+            isinstance(image_space, gym.spaces.Box) and image_space.dtype == np.uint8 and len(image_space.shape) == 3
+        ):
+            raise ValueError(f"unsupported image space {image_space}: expected a uint8 Box of shape (H, W, C)")
+        height, width, channels = image_space.shape
+        fields["image"] = InputField((height, width, 1 if grayscale else channels), torch.uint8)
+    elif grayscale:
+        raise ValueError(f"model.grayscale needs an image observation; {observation_space} has none")
     if vector_space is not None:
         fields["vector"] = InputField((int(np.prod(vector_space.shape)),), torch.float32)
     return fields
@@ -182,8 +189,24 @@ class ObservationDecoder(nn.Module):
         return F.binary_cross_entropy_with_logits(logits, target)
 
 
-# The one registry of visual encoders: name -> class taking the (H, W, C) image shape, with ``output_size``.
-ENCODERS: dict[str, Callable[[tuple[int, int, int]], nn.Module]] = {"nature_cnn": NatureCNN}
+# The one registry of image encoders: name -> class taking the (H, W, C) image shape, with ``output_size``.
+IMAGE_ENCODERS: dict[str, Callable[[tuple[int, int, int]], nn.Module]] = {"nature_cnn": NatureCNN}
+# ``model.encoder``'s choices: an image encoder (the vector inputs then go through one layer of
+# ``vector_encoder_size``), or ``mlp`` for observations without an image (the vector inputs go through an MLP of
+# ``mlp_sizes``).
+ENCODERS: dict[str, str] = {
+    **{name: "image observations" for name in IMAGE_ENCODERS},
+    "mlp": "vector observations: an MLP of model.mlp_sizes",
+}
+
+
+def mlp(input_size: int, sizes: Sequence[int]) -> nn.Sequential:
+    """Linear + ReLU layers of ``sizes`` (orthogonal init, gain sqrt(2))."""
+    layers: list[nn.Module] = []
+    for size in sizes:
+        layers += [orthogonal(nn.Linear(input_size, size), HIDDEN_GAIN), nn.ReLU()]
+        input_size = size
+    return nn.Sequential(*layers)
 
 
 class ActorCritic(nn.Module):
@@ -203,17 +226,33 @@ class ActorCritic(nn.Module):
         super().__init__()
         self.action_dims = action_branches(action_space)
         self.inputs = model_inputs(observation_space, action_space, config, helm_size)
-        self.image_encoder = ENCODERS[config.encoder](self.inputs["image"].shape)  # type: ignore[arg-type]
+        image = self.inputs.get("image")
+        if config.encoder == "mlp":
+            if image is not None:
+                raise ValueError(
+                    f"model.encoder=mlp takes observations without an image, but {observation_space} has one: "
+                    f"use an image encoder ({', '.join(IMAGE_ENCODERS)})"
+                )
+            self.image_encoder = None
+            vector_sizes = list(config.mlp_sizes)
+        else:
+            if image is None:
+                raise ValueError(
+                    f"model.encoder={config.encoder} needs an image observation, but {observation_space} has none: "
+                    "set model.encoder: mlp (its layers: model.mlp_sizes)"
+                )
+            self.image_encoder = IMAGE_ENCODERS[config.encoder](image.shape)  # type: ignore[arg-type]
+            vector_sizes = [config.vector_encoder_size]
+        if (helm_size or reconstruction) and image is None:
+            raise ValueError(f"the HELM branch and the reconstruction loss need an image; {observation_space} has none")
         vector_size = self.inputs["vector"].shape[0] if "vector" in self.inputs else 0
         vector_size += sum(self.action_dims) if config.previous_action else 0
         vector_size += 1 if config.previous_reward else 0
         self.vector_encoder = None
-        feature_size = self.image_encoder.output_size + helm_size
+        feature_size = helm_size + (0 if self.image_encoder is None else self.image_encoder.output_size)
         if vector_size:
-            self.vector_encoder = nn.Sequential(
-                orthogonal(nn.Linear(vector_size, config.vector_encoder_size), HIDDEN_GAIN), nn.ReLU()
-            )
-            feature_size += config.vector_encoder_size
+            self.vector_encoder = mlp(vector_size, vector_sizes)
+            feature_size += vector_sizes[-1]
         self.memory = build_memory(config, feature_size)
         hidden = config.hidden_size
         self.body = nn.Sequential(orthogonal(nn.Linear(self.memory.output_size, hidden), HIDDEN_GAIN), nn.ReLU())
@@ -221,8 +260,10 @@ class ActorCritic(nn.Module):
         self.value_stream = nn.Sequential(orthogonal(nn.Linear(hidden, hidden), HIDDEN_GAIN), nn.ReLU())
         self.policy_heads = nn.ModuleList(orthogonal(nn.Linear(hidden, n), POLICY_GAIN) for n in self.action_dims)
         self.value_head = orthogonal(nn.Linear(hidden, 1), VALUE_GAIN)
-        frame_shape = observation_fields(observation_space, config.grayscale)["image"].shape
-        self.decoder = ObservationDecoder(self.memory.output_size, frame_shape) if reconstruction else None  # type: ignore[arg-type]
+        self.decoder = None
+        if reconstruction:
+            frame_shape = observation_fields(observation_space, config.grayscale)["image"].shape
+            self.decoder = ObservationDecoder(self.memory.output_size, frame_shape)  # type: ignore[arg-type]
 
     @property
     def state_shape(self) -> tuple[int, ...]:
@@ -238,7 +279,7 @@ class ActorCritic(nn.Module):
 
     def encode(self, inputs: dict[str, Tensor]) -> Tensor:
         """Features (N, F) of a flat batch of steps."""
-        features = [self.image_encoder(inputs["image"])]
+        features = [] if self.image_encoder is None else [self.image_encoder(inputs["image"])]
         if "helm" in inputs:
             features.append(inputs["helm"].to(features[0].dtype))
         if self.vector_encoder is not None:

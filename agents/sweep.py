@@ -761,15 +761,16 @@ _PARAMETERS: dict[str, int] = {}
 def parameter_count(config: Config) -> int:
     """Trainable parameters of the run's model (the frozen HELM branch is not checkpointed)."""
     reconstruction = config.ppo.reconstruction_coef > 0  # the decoder is trained, so it counts
-    settings = [config.env.id, config.env.options, config_to_dict(config.model), reconstruction]
+    env = config.env  # what decides the spaces
+    settings = [env.id, env.options, env.make_kwargs, env.wrappers, env.image_layout, config_to_dict(config.model)]
+    settings.append(reconstruction)
     key = json.dumps(settings, sort_keys=True, default=str)
     if key not in _PARAMETERS:
         import torch
 
-        import envs
         from agents.models import ActorCritic
 
-        core = envs.make_core(config.env.id, 1, config.env.options)
+        core = config.env.make_core(1)
         helm = _helm_width(config) if config.model.helm.enabled else 0
         with torch.device("meta"):  # shapes only: no memory, no initialisation cost
             spaces = core.single_observation_space, core.single_action_space

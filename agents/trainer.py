@@ -37,7 +37,6 @@ from typing import Any
 import numpy as np
 import torch
 
-import envs
 from agents.actor import Actor, refresh_copy, rollout_copy
 from agents.buffer import RolloutBuffer
 from agents.checkpoint import (
@@ -95,7 +94,7 @@ class Trainer:
         self.action_generator.manual_seed(int(seeds[2].generate_state(1)[0]))
 
         workers = config.run.workers
-        self.core = envs.make_core(config.env.id, workers, config.env.options)
+        self.core = config.env.make_core(workers)
         spaces = self.core.single_observation_space, self.core.single_action_space
         self.model, self.helm = build_agent(config, *spaces, self.device)
         self.rollout_model = rollout_copy(self.model, config.run.precision)
@@ -197,7 +196,7 @@ class Trainer:
         seeds = seed_list(config.eval_seeds)
         slots = len(seeds) * config.eval.repetitions
         if self._eval_core is None:
-            self._eval_core = envs.make_core(config.env.id, slots, config.env.options)
+            self._eval_core = config.env.make_core(slots)
         records = evaluate(
             self.rollout_model,
             self.helm,
@@ -316,7 +315,7 @@ class Trainer:
         reports (under ``env/``)."""
         if not finals:
             return {}
-        metric = metric_of(self.config.env.id)
+        metric = metric_of(self.config.env.id, self.config.env.metric)
         metrics = {
             "charts/episodic_return": float(np.mean([f["reward"] for f in finals])),
             "charts/episodic_length": float(np.mean([f["length"] for f in finals])),
@@ -330,7 +329,7 @@ class Trainer:
         return metrics
 
     def _training_row(self, metrics: dict[str, float]) -> dict[str, Any]:
-        metric = metric_of(self.config.env.id)
+        metric = metric_of(self.config.env.id, self.config.env.metric)
         return {
             "run": self.run_dir.name,
             "method": self.config.method,

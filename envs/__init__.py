@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -36,12 +37,34 @@ ENV_IDS: dict[str, tuple[str, dict[str, Any]]] = {
 }
 
 
-def make_core(env_id: str, num_envs: int = 1, options: dict[str, Any] | None = None) -> BatchedCore:
-    """The batched core behind ``env_id`` with ``num_envs`` slots (what the trainer drives directly)."""
-    if env_id not in ENV_IDS:
-        raise ValueError(f"unknown environment id {env_id!r}; valid ids: {', '.join(ENV_IDS)}")
-    core, variant = ENV_IDS[env_id]
-    return load_core(core)(num_envs=num_envs, options=options, **variant)
+def make_core(
+    env_id: str,
+    num_envs: int = 1,
+    options: dict[str, Any] | None = None,
+    *,
+    make_kwargs: Mapping[str, Any] | None = None,
+    wrappers: Sequence[str | Mapping[str, Any]] = (),
+    vectorization: str = "sync",
+    image_layout: str = "hwc",
+    check_seeding: bool = True,
+) -> BatchedCore:
+    """The batched core behind ``env_id`` with ``num_envs`` slots (what the trainer drives directly).
+
+    An id of :data:`ENV_IDS` is this project's natively batched core; any other gymnasium id (registered, or
+    ``"module:EnvId"``, which imports the module first), and one of these ids with ``make_kwargs`` or ``wrappers``,
+    runs as ``num_envs`` gymnasium environments in a vector env (:class:`envs.gymnasium_core.GymnasiumCore`, which
+    takes the keyword arguments)."""
+    if env_id in ENV_IDS and not make_kwargs and not wrappers:
+        core, variant = ENV_IDS[env_id]
+        return load_core(core)(num_envs=num_envs, options=options, **variant)
+    from envs.gymnasium_core import GymnasiumCore, UnknownEnvironmentError
+
+    try:
+        return GymnasiumCore(
+            env_id, num_envs, options, make_kwargs, wrappers, vectorization, image_layout, check_seeding
+        )
+    except UnknownEnvironmentError as err:
+        raise UnknownEnvironmentError(f"{err}; this project's own ids: {', '.join(ENV_IDS)}") from err
 
 
 def _register_all() -> None:

@@ -78,6 +78,9 @@ class BatchedCore:
     # sprite). Off: an episode depends only on its seed and options, whatever the slot played before. The parity
     # replays turn it on (``core.reference_carryover = True``) to reproduce traces recorded on reused instances.
     reference_carryover: bool = False
+    # Whether a slot's state is rebuilt by resetting it with its seed and replaying its actions (what a checkpoint
+    # stores). A gymnasium environment's copies (envs.gymnasium_core) cannot promise it.
+    replayable: ClassVar[bool] = True
 
     def __init__(self, num_envs: int = 1, options: Mapping[str, Any] | None = None) -> None:
         if not isinstance(num_envs, int | np.integer) or num_envs < 1:
