@@ -306,6 +306,20 @@ class PPOConfig:
     )
 
 
+WANDB_MODES = ("online", "offline", "disabled")
+
+
+@dataclass
+class WandbConfig:
+    """Weights & Biases logging (``pip install -e ".[wandb]"``), off while ``project`` is empty: the TensorBoard
+    scalars, the resolved config and the run's git revision, one W&B run per run directory (a resume continues it)."""
+
+    project: str = param("", "W&B project (empty: no W&B logging)")
+    entity: str = param("", "W&B entity, a user or team (empty: the default of the logged-in account)")
+    group: str = param("", "W&B group, e.g. one per sweep panel (empty: none)")
+    mode: str = param("online", "'online', 'offline' (logs kept under <run>/wandb, synced later) or 'disabled'")
+
+
 @dataclass
 class RunConfig:
     """How long, how wide and where to train."""
@@ -322,6 +336,7 @@ class RunConfig:
     progress_bar: bool = param(True, "show a tqdm progress bar")
     method: str = param("", "short name of the agent in records and plots (empty: derived, e.g. gru, stack4, helm)")
     task: str = param("", "short name of the task in records and plots (empty: env id + non-default options)")
+    wandb: WandbConfig = param(WandbConfig(), "Weights & Biases logging (off unless wandb.project is set)")
 
 
 @dataclass
@@ -749,6 +764,11 @@ def _check_block(block: Any, prefix: str) -> None:
             )
         if block.time != "":
             slurm_minutes(block.time, f"{prefix}.time")
+    elif isinstance(block, MetricConfig):
+        if block.low is not None and block.high is not None and block.low > block.high:
+            raise ConfigError(f"{prefix}.low={block.low} is above {prefix}.high={block.high}: expected low <= high")
+    elif isinstance(block, WandbConfig):
+        _choice(f"{prefix}.mode", block.mode, WANDB_MODES)
     elif isinstance(block, RunConfig):
         _choice(f"{prefix}.precision", block.precision, ("fp32", "bf16"))
         if not is_device_name(block.device):

@@ -287,6 +287,13 @@ NOT_IN_DIGEST = {  # config keys that do not change the experiment a run belongs
     "run.checkpoint_interval": "bookkeeping (a resumed run replays the same steps)",
     "run.keep_checkpoints": "bookkeeping",
     "run.progress_bar": "display",
+    "run.wandb.project": "where the logs also go",
+    "run.wandb.entity": "where the logs also go",
+    "run.wandb.group": "where the logs also go",
+    "run.wandb.mode": "where the logs also go",
+    "env.vectorization": "how a gymnasium environment's copies run: the same episodes either way",
+    "env.check_seeding": "whether an environment that ignores seeds is refused (a run that went ahead is the same)",
+    "env.metric.label": "a name",
     "grid": "a run's config holds no grid",
 }
 

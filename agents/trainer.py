@@ -57,6 +57,7 @@ from agents.metrics import metric_of
 from agents.ppo import explained_variance, gae_advantages, ppo_update
 from agents.results import TRAINING_COLUMNS, config_digest
 from agents.sequences import split_sequences
+from agents.tracking import scalar_writer
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
 EXTENDABLE = ("run.total_steps",)  # the only keys a resume may change: a longer run, everything else as trained
@@ -163,7 +164,7 @@ class Trainer:
             return []
         self._write_run_files()
         self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
-        writer = _summary_writer(self.run_dir, self.global_step)
+        writer = scalar_writer(_summary_writer(self.run_dir, self.global_step), self.config, self.run_dir)
         progress = _progress_bar(self.config, self.global_step)
         try:
             while self.update < self.num_updates:

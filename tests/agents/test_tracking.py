@@ -1,0 +1,143 @@
+"""Weights & Biases logging (run.wandb): the TensorBoard scalars, the config and git revision, one W&B run per run
+directory that a resume continues; off by default. A fake wandb module records the calls; W&B's offline mode runs
+for real where wandb is installed."""
+
+from __future__ import annotations
+
+import json
+import sys
+import types
+from pathlib import Path
+from typing import Any
+
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from agents.config import ConfigError, config_from_dict
+from agents.io import git_revision
+from agents.trainer import Trainer
+
+TINY = {
+    "env": {"id": "ProofOfMemory-v0", "options": {"delay": 2}},
+    "model": {"memory": "gru", "memory_size": 8, "hidden_size": 8, "vector_encoder_size": 8},
+    "ppo": {"epochs": 1, "minibatches": 2},
+    "run": {
+        "total_steps": 4 * 8 * 3,
+        "workers": 4,
+        "worker_steps": 8,
+        "checkpoint_interval": 1,
+        "progress_bar": False,
+        "torch_threads": 1,
+    },
+    "eval": {"interval": 2, "seeds": [100000, 100001], "repetitions": 1},
+}
+WANDB = ("run.wandb.project=memory-gym-tests", "run.wandb.group=tiny", "run.wandb.mode=offline")
+
+
+class FakeWandb(types.ModuleType):
+    """What the trainer asks of wandb, recorded: init's arguments, every log call, finish."""
+
+    def __init__(self) -> None:
+        super().__init__("wandb")
+        self.inits: list[dict[str, Any]] = []
+        self.logs: list[tuple[dict[str, float], int]] = []
+        self.finished = 0
+
+    def init(self, **kwargs: Any) -> Any:
+        self.inits.append(kwargs)
+        fake = self
+
+        class Run:
+            def log(self, data: dict[str, float], step: int) -> None:
+                fake.logs.append((dict(data), step))
+
+            def finish(self) -> None:
+                fake.finished += 1
+
+        return Run()
+
+
+def _kill_after(trainer: Trainer, updates: int) -> None:
+    run_update = trainer.train_update
+
+    def maybe_die() -> dict[str, float]:
+        if trainer.update == updates:
+            raise KeyboardInterrupt
+        return run_update()
+
+    trainer.train_update = maybe_die  # type: ignore[method-assign]
+
+
+def _tensorboard(run_dir: Path) -> dict[tuple[str, int], float]:
+    points = {}
+    for events in run_dir.glob("events.out.tfevents.*"):
+        accumulator = EventAccumulator(str(events))
+        accumulator.Reload()
+        for tag in accumulator.Tags()["scalars"]:
+            points.update({(tag, e.step): e.value for e in accumulator.Scalars(tag)})
+    return points
+
+
+def test_wandb_gets_the_tensorboard_scalars_config_and_revision_and_a_resume_continues_its_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    fake = FakeWandb()
+    monkeypatch.setitem(sys.modules, "wandb", fake)
+    config = config_from_dict(TINY, list(WANDB))
+    run_dir = tmp_path / "run"
+    killed = Trainer(config, run_dir)
+    _kill_after(killed, 2)
+    with pytest.raises(KeyboardInterrupt):
+        killed.train()
+    assert fake.finished == 1  # closed on the way out, like the TensorBoard writer
+    (first,) = fake.inits
+    run_id = json.loads((run_dir / "wandb.json").read_text())["id"]
+    assert first["id"] == run_id and first["resume"] == "allow" and first["name"] == "run"
+    assert (first["project"], first["group"], first["mode"], first["dir"]) == (
+        "memory-gym-tests",
+        "tiny",
+        "offline",
+        str(run_dir),
+    )
+    assert first["config"]["env"]["id"] == "ProofOfMemory-v0" and first["config"]["run"]["wandb"]["group"] == "tiny"
+    assert first["config"]["provenance"]["git"] == git_revision()
+    logged = {(tag, step): value for data, step in fake.logs for tag, value in data.items()}
+    tensorboard = _tensorboard(run_dir)
+    assert logged.keys() == tensorboard.keys()  # the same scalars at the same steps
+    assert [logged[key] for key in tensorboard] == pytest.approx(list(tensorboard.values()), rel=1e-6)  # float32 there
+    assert {"charts/episodic_return", "losses/value_loss", "eval/metric"} <= {tag for tag, _ in logged}
+
+    Trainer.resume(run_dir).train()
+    assert [init["id"] for init in fake.inits] == [run_id, run_id] and fake.finished == 2
+    assert max(step for _, step in fake.logs) == config.run.total_steps
+
+
+def test_wandb_is_off_by_default_and_needs_no_install(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "wandb", None)  # importing it fails
+    Trainer(config_from_dict(TINY, ["run.total_steps=32"]), tmp_path / "run").train()
+    assert not (tmp_path / "run" / "wandb.json").exists()
+    with pytest.raises(ImportError, match=r"wandb is not installed: pip install -e '.\[wandb\]'"):
+        Trainer(config_from_dict(TINY, ["run.total_steps=32", *WANDB]), tmp_path / "other").train()
+    with pytest.raises(
+        ConfigError, match="run.wandb.mode='cloud' is invalid; valid choices: online, offline, disabled"
+    ):
+        config_from_dict(TINY, ["run.wandb.mode=cloud"])
+
+
+def test_wandb_offline_mode_writes_one_local_run_that_a_resume_continues(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    pytest.importorskip("wandb", reason="wandb is an optional extra: pip install -e '.[wandb]'")
+    monkeypatch.setenv("WANDB_SILENT", "true")
+    monkeypatch.setenv("WANDB_CONSOLE", "off")
+    config = config_from_dict(TINY, [*WANDB, "eval.interval=0"])
+    run_dir = tmp_path / "run"
+    killed = Trainer(config, run_dir)
+    _kill_after(killed, 2)
+    with pytest.raises(KeyboardInterrupt):
+        killed.train()
+    Trainer.resume(run_dir).train()
+    run_id = json.loads((run_dir / "wandb.json").read_text())["id"]
+    offline = sorted(path.name for path in (run_dir / "wandb").glob("offline-run-*"))
+    assert len(offline) == 2 and all(name.endswith(f"-{run_id}") for name in offline)
+    assert all(any(path.glob(f"run-{run_id}.wandb")) for path in (run_dir / "wandb").glob("offline-run-*"))
