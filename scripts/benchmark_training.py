@@ -4,6 +4,7 @@
         [--epochs 3] [--minibatches 8] [--updates 4] [--repeats 3] [--precision bf16]
         [--methods gru,ppo,stack4,stack16,helm] [--sb3 auto]
     python scripts/benchmark_training.py --env MortarMayhem-Grid-v0 --precision fp32 --methods gru,trxl,gtrxl --sb3 no
+    python scripts/benchmark_training.py --precision fp32 --methods gru,lru,ffm,mamba --sb3 no
 
 * end to end, per method (configs/mortar_mayhem_b_grid/<method>.yaml at the benchmark's batch): ``train_update()``
   (rollout in the batched env, GAE, sequence splitting, PPO epochs with optimizer steps), env steps per second, with
@@ -57,7 +58,7 @@ from agents.trainer import Trainer  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"
 METHODS = ("gru", "ppo", "stack4", "stack16", "helm")  # the full table
-EXTRA_METHODS = ("trxl", "gtrxl")  # measured on request (--methods), beside GRU-PPO at the same batch
+EXTRA_METHODS = ("trxl", "gtrxl", "lru", "ffm", "mamba")  # measured on request (--methods), beside GRU-PPO
 DEFAULT_OUT = SCRATCH / "benchmarks" / "training.json"
 
 
