@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,11 +22,18 @@ import yaml
 
 from agents.actor import rollout_copy
 from agents.config import Config, config_from_dict, config_to_dict
-from agents.io import atomic_write_bytes
+from agents.io import atomic_write_bytes, content_record
 from agents.models import ActorCritic, observation_fields
 
-CHECKPOINT_FORMAT = 2
+CHECKPOINT_FORMAT = 2  # of the saved state (the dict); the file around it is described by CHECKPOINT_MAGIC
 CHECKPOINT_GLOB = "update_*.pt"
+# A checkpoint file: this line, one line of JSON with the payload's size and SHA-256, then the payload (torch.save)
+CHECKPOINT_MAGIC = b"memgym-checkpoint 1\n"
+LEGACY_MAGIC = b"PK\x03\x04"  # a bare torch.save zip, as checkpoints were written before they had a checksum
+
+
+class DamagedCheckpoint(ValueError):
+    """A checkpoint file is truncated, corrupted or not a checkpoint (the message names it); it is never loaded."""
 
 
 def build_agent(
@@ -87,23 +95,90 @@ def checkpoint_update(path: str | Path) -> int:
 
 
 def write_checkpoint(path: str | Path, state: dict[str, Any], keep: int = 0) -> Path:
-    """Write ``state`` atomically, then keep only the ``keep`` newest checkpoints beside it (0: all)."""
+    """Write ``state`` atomically with its size and checksum (:data:`CHECKPOINT_MAGIC`), read it back and check it,
+    then keep only the ``keep`` newest checkpoints beside it (0: all): an older one goes only once this one is
+    known to be whole."""
     path = Path(path)
     data = io.BytesIO()
     torch.save({"format": CHECKPOINT_FORMAT, **state}, data)
-    atomic_write_bytes(path, data.getvalue())
+    payload = data.getvalue()
+    header = json.dumps(content_record(payload), sort_keys=True).encode()
+    atomic_write_bytes(path, b"".join((CHECKPOINT_MAGIC, header, b"\n", payload)))
+    checked_payload(path)
     if keep:
         for old in sorted(path.parent.glob(CHECKPOINT_GLOB))[:-keep]:
             old.unlink()
     return path
 
 
+def checked_payload(path: str | Path) -> bytes:
+    """The payload of a checkpoint file after checking it against the size and SHA-256 its header records;
+    :class:`DamagedCheckpoint` when the file is truncated, corrupted or not a checkpoint. A file written before
+    checkpoints carried a checksum (a bare ``torch.save`` zip) is returned whole, unchecked."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as err:
+        raise DamagedCheckpoint(f"{path} cannot be read: {err}") from err
+    if raw.startswith(LEGACY_MAGIC):
+        return raw
+    if not raw.startswith(CHECKPOINT_MAGIC):
+        raise DamagedCheckpoint(f"{path} is not a checkpoint (its first bytes are not {CHECKPOINT_MAGIC!r})")
+    header, newline, payload = raw[len(CHECKPOINT_MAGIC) :].partition(b"\n")
+    try:
+        recorded = json.loads(header) if newline else None
+    except ValueError:
+        recorded = None
+    if not isinstance(recorded, dict) or not {"bytes", "sha256"} <= set(recorded):
+        raise DamagedCheckpoint(f"{path} is damaged: its header (size and checksum) is cut short or unreadable")
+    if len(payload) != recorded["bytes"]:
+        raise DamagedCheckpoint(
+            f"{path} is damaged: {len(payload)} bytes of payload where its header records {recorded['bytes']} "
+            "(truncated, or written over)"
+        )
+    if content_record(payload)["sha256"] != recorded["sha256"]:
+        raise DamagedCheckpoint(f"{path} is damaged: its payload does not match the SHA-256 its header records")
+    return payload
+
+
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
-    # Loaded on the CPU: RNG states must stay CPU tensors; weights and optimizer state move to their device.
-    state = torch.load(path, map_location="cpu", weights_only=False)
-    if state.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: checkpoint format {state.get('format')!r}, expected {CHECKPOINT_FORMAT}")
+    """The state saved in a checkpoint, checked first (:func:`checked_payload`): a damaged file is never loaded."""
+    payload = checked_payload(path)
+    try:  # Loaded on the CPU: RNG states must stay CPU tensors; weights and optimizer state move to their device.
+        state = torch.load(io.BytesIO(payload), map_location="cpu", weights_only=False)
+    except Exception as err:  # noqa: BLE001 (an unchecked legacy file can fail in any way torch's unpickler fails)
+        raise DamagedCheckpoint(f"{path} is damaged: torch.load failed ({type(err).__name__}: {err})") from err
+    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
+        found = state.get("format") if isinstance(state, dict) else type(state).__name__
+        raise ValueError(f"{path}: checkpoint format {found!r}, expected {CHECKPOINT_FORMAT}")
     return state
+
+
+def intact_checkpoint(run_dir: str | Path, usable: Any = None) -> tuple[Path, dict[str, Any], list[str]]:
+    """The newest checkpoint of ``run_dir`` that is whole (:func:`read_checkpoint`) and, when given, passes
+    ``usable(path, state)`` (which raises :class:`DamagedCheckpoint` otherwise), with its state and one line per
+    newer checkpoint passed over (why). Those are renamed ``*.damaged``, out of the checkpoints' glob, so that no
+    later pruning keeps them instead of good ones. :class:`DamagedCheckpoint` naming every file when none is
+    usable; FileNotFoundError when there is no checkpoint."""
+    paths = list_checkpoints(run_dir)
+    if not paths:
+        raise FileNotFoundError(f"{run_dir} holds no checkpoint to resume from (checkpoints/{CHECKPOINT_GLOB})")
+    passed: list[str] = []
+    for path in reversed(paths):
+        try:
+            state = read_checkpoint(path)
+            if usable is not None:
+                usable(path, state)
+        except DamagedCheckpoint as err:
+            passed.append(str(err))
+            continue
+        notes = []
+        for line, damaged in zip(passed, reversed(paths), strict=False):
+            aside = damaged.with_name(damaged.name + ".damaged")
+            os.replace(damaged, aside)
+            notes.append(f"{line}; moved to {aside.name}")
+        return path, state, notes
+    raise DamagedCheckpoint(f"{run_dir}: no intact checkpoint to resume from:\n  " + "\n  ".join(passed))
 
 
 def check_checkpoint_config(state: dict[str, Any], config: Config, path: str | Path) -> int | None:

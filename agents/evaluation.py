@@ -25,13 +25,22 @@ import torch
 from agents.actor import Actor, Outcome
 from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
 from agents.config import Config, check_disjoint_seeds, is_device_name
-from agents.io import atomic_write_bytes, atomic_write_text, provenance, write_json_atomic
+from agents.io import (
+    atomic_write_bytes,
+    atomic_write_text,
+    content_record,
+    exclusive_lock,
+    provenance,
+    write_json_atomic,
+)
 from agents.metrics import metric_of
 from agents.models import ActorCritic
+from agents.preemption import deferred_signals
 from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS, config_digest, env_options_text, read_episodes
 from agents.results import summarize as summarize_episodes
 
 RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
+LOCK_FILE = ".lock"  # in an evaluation's results directory: held while it is read and while it is merged into
 # called with the actor once before the first decision (outcome None) and after every decision with its outcome
 FrameHook = Callable[[Actor, Outcome | None], None]
 
@@ -119,19 +128,28 @@ def record_means(records: Iterable[dict[str, Any]]) -> dict[str, float]:
 
 
 def write_records(path: str | Path, records: Sequence[dict[str, Any]]) -> None:
-    """Write records as CSV atomically: :data:`RECORD_COLUMNS` first, then every other key in sorted order."""
+    """Write records as CSV atomically (:func:`records_csv_text`)."""
+    atomic_write_text(path, records_csv_text(records))
+
+
+def records_csv_text(records: Sequence[dict[str, Any]]) -> str:
+    """Records as CSV: :data:`RECORD_COLUMNS` first, then every other key in sorted order."""
     extra = sorted({key for record in records for key in record} - set(RECORD_COLUMNS))
     text = io.StringIO()
     writer = csv.DictWriter(text, fieldnames=RECORD_COLUMNS + extra, lineterminator="\n")
     writer.writeheader()
     writer.writerows(records)
-    atomic_write_text(path, text.getvalue())
+    return text.getvalue()
 
 
-def read_records(path: str | Path) -> list[dict[str, Any]]:
-    """Records written by :func:`write_records`, numbers parsed (empty cells dropped)."""
+def read_records(path: str | Path, skip_malformed: bool = False) -> list[dict[str, Any]]:
+    """Records written by :func:`write_records`, numbers parsed (empty cells dropped). ``skip_malformed`` leaves out
+    rows with too few or too many cells (a line cut short) instead of returning them with holes."""
     with open(path, newline="") as handle:
-        return [{k: _parse(v) for k, v in row.items() if v != ""} for row in csv.DictReader(handle)]
+        rows = list(csv.DictReader(handle))
+    if skip_malformed:
+        rows = [row for row in rows if None not in row and None not in row.values()]
+    return [{k: _parse(v) for k, v in row.items() if v != ""} for row in rows]
 
 
 def _parse(text: str) -> Any:
@@ -324,17 +342,32 @@ def _merge(old: Sequence[dict], new: Sequence[dict], key: Callable[[Mapping[str,
 
 
 def _existing(out: Path) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """The records and the summary a results directory holds already (none for a new directory)."""
+    """The records and the summary a results directory holds already (none for a new directory). The files that
+    summary.json vouches for (``files``: size and SHA-256) must be as it recorded them: a truncated or corrupted
+    one is refused by name before anything is evaluated."""
     episodes, summary = out / "episodes.csv", out / "summary.json"
-    records = read_records(episodes) if episodes.is_file() else []
-    if records:
-        read_episodes(out)  # refuses a malformed file by name before anything is evaluated
     found: dict[str, Any] = {}
     if summary.is_file():
         try:
             found = json.loads(summary.read_text())
         except json.JSONDecodeError as err:
-            raise ValueError(f"{summary} is not valid JSON ({err}); move it away to evaluate into {out}") from None
+            raise ValueError(
+                f"{summary} is not valid JSON ({err}): truncated or corrupted; move it away to evaluate into {out}"
+            ) from None
+    for name, recorded in found.get("files", {}).items():
+        path = out / name
+        actual = content_record(path.read_bytes()) if path.is_file() else None
+        if actual != recorded:
+            size = "missing" if actual is None else f"{actual['bytes']} bytes"
+            raise ValueError(
+                f"{path} is not what {summary.name} recorded ({recorded['bytes']} bytes, SHA-256 "
+                f"{recorded['sha256'][:12]}...; found {size}{', other content' if actual else ''}): it was truncated "
+                f"or corrupted, or an evaluation was killed between writing it and {summary.name}; restore it, or "
+                f"move {out} away to evaluate anew"
+            )
+    records = read_records(episodes) if episodes.is_file() else []
+    if records:
+        read_episodes(out)  # refuses a malformed file by name before anything is evaluated
     return records, found
 
 
@@ -404,20 +437,14 @@ def evaluate_runs(
                 select_checkpoints(directory, checkpoints, config.batch_size),
             )
         )
-    old_records, old_summary = _existing(out)
+    with exclusive_lock(out / LOCK_FILE):  # another evaluation into out may be writing: read between its writes
+        old_records, old_summary = _existing(out)
     taken = _taken(old_summary)
     names = unique_run_names(directories, [(plan.method, plan.task) for plan in plans], taken)
     for plan, name in zip(plans, names, strict=True):
         plan.name = name
     planned = set().union(*(plan.keys() for plan in plans))
-    clashes = [record for record in old_records if _record_key(record) in planned]
-    if clashes and not force:
-        first = dict(zip(("method", "task", "run", "step", "seed", "repetition"), _record_key(clashes[0]), strict=True))
-        raise ValueError(
-            f"{out / 'episodes.csv'} already holds {len(clashes)} of the records this evaluation would write (e.g. "
-            + ", ".join(f"{key}={value}" for key, value in first.items())
-            + "): give --force to replace them, or another --out directory"
-        )
+    _check_clashes(out, old_records, planned, force)
 
     stems = [plan.name.replace("/", "-") for plan in plans]  # GIF names, unique among this evaluation's runs
     stems = [f"{p.method}-{p.task}-{s}" if stems.count(s) > 1 else s for p, s in zip(plans, stems, strict=True)]
@@ -457,6 +484,51 @@ def evaluate_runs(
         else:
             say(f"note: {plan.directory} has no training.csv: no training-seed curve for run {plan.name}")
 
+    evaluation = {
+        "runs": [str(run) for run in run_dirs],
+        "names": [plan.name for plan in plans],
+        "seeds": seeds,
+        "repetitions": repetitions,
+        "checkpoints": checkpoints,
+        "greedy": greedy,
+    }
+    # Merged into what out holds now, under its lock: an evaluation that wrote there meanwhile keeps its records
+    with exclusive_lock(out / LOCK_FILE):
+        return _merge_into(out, plans, records, training, force, say, evaluation)
+
+
+def _check_clashes(out: Path, old_records: Sequence[dict[str, Any]], planned: set[tuple], force: bool) -> None:
+    clashes = [record for record in old_records if _record_key(record) in planned]
+    if clashes and not force:
+        first = dict(zip(("method", "task", "run", "step", "seed", "repetition"), _record_key(clashes[0]), strict=True))
+        raise ValueError(
+            f"{out / 'episodes.csv'} already holds {len(clashes)} of the records this evaluation would write (e.g. "
+            + ", ".join(f"{key}={value}" for key, value in first.items())
+            + "): give --force to replace them, or another --out directory"
+        )
+
+
+def _merge_into(
+    out: Path,
+    plans: Sequence[_Plan],
+    records: list[dict[str, Any]],
+    training: list[dict[str, Any]],
+    force: bool,
+    say: Callable[[str], None],
+    evaluation: dict[str, Any],
+) -> dict[str, Any]:
+    """Merge this evaluation's records and training rows into ``out`` (whose lock the caller holds) and write its
+    three files together (pre-emption signals wait until they are written); returns the new summary."""
+    old_records, old_summary = _existing(out)
+    _check_clashes(out, old_records, set().union(*(plan.keys() for plan in plans)), force)
+    taken = _taken(old_summary)
+    for plan in plans:
+        held = taken.get((plan.method, plan.task, plan.name))
+        if held is not None and held != str(plan.directory.resolve()):
+            raise ValueError(
+                f"{out}: while this evaluation ran, another one named {held} run {plan.name} ({plan.method}, "
+                f"{plan.task}); evaluate {plan.directory} again to get a name of its own"
+            )
     merged, replaced = _merge(old_records, records, _record_key)
     if old_records:
         say(
@@ -475,22 +547,20 @@ def evaluate_runs(
     summary["run_directories"] = [
         {"method": key[0], "task": key[1], "run": key[2], "directory": path} for key, path in sorted(registry.items())
     ]
-    summary["evaluation"] = {
-        "runs": [str(run) for run in run_dirs],
-        "names": [plan.name for plan in plans],
-        "seeds": seeds,
-        "repetitions": repetitions,
-        "checkpoints": checkpoints,
-        "greedy": greedy,
-        "replaced": replaced,
-        **provenance(),
-    }
+    summary["evaluation"] = {**evaluation, "replaced": replaced, **provenance()}
     earlier = list(old_summary.get("earlier_evaluations", []))
     summary["earlier_evaluations"] = earlier + ([old_summary["evaluation"]] if "evaluation" in old_summary else [])
-    write_records(out / "episodes.csv", merged)
-    if merged_training:
-        atomic_write_text(out / "training.csv", _csv_text(TRAINING_COLUMNS, merged_training))
-    write_json_atomic(out / "summary.json", summary, sort_keys=False)
+    episodes_text = records_csv_text(merged).encode()
+    training_text = _csv_text(TRAINING_COLUMNS, merged_training).encode() if merged_training else None
+    # what summary.json vouches for: a truncated or corrupted episodes.csv / training.csv is refused when read back
+    summary["files"] = {"episodes.csv": content_record(episodes_text)}
+    if training_text is not None:
+        summary["files"]["training.csv"] = content_record(training_text)
+    with deferred_signals():
+        atomic_write_bytes(out / "episodes.csv", episodes_text)
+        if training_text is not None:
+            atomic_write_bytes(out / "training.csv", training_text)
+        write_json_atomic(out / "summary.json", summary, sort_keys=False)
     return summary
 
 

@@ -10,7 +10,9 @@ use it from memory-gym's isolated environment.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
+import hashlib
 import importlib.metadata
 import json
 import os
@@ -18,10 +20,12 @@ import platform
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from agents.faults import at_write
 
 ROOT = Path(__file__).resolve().parent.parent
 COMMITTED_RESULTS = ROOT / "results"  # committed result tables: replaced only where --out names them
@@ -35,17 +39,30 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    at_write(path, "open")  # the fault-injection hooks (MEMGYM_FAULT, agents/faults.py): no-ops unless set
     handle = tempfile.NamedTemporaryFile("wb", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False)
     try:
         with handle:
-            handle.write(data)
+            view, half = memoryview(data), len(data) // 2  # in two halves: a fault can strike in between
+            handle.write(view[:half])
+            at_write(path, "data")
+            handle.write(view[half:])
             handle.flush()
+            at_write(path, "fsync")
             os.fsync(handle.fileno())
         os.chmod(handle.name, 0o666 & ~_umask())  # the mode a plain open() would give, not the temp file's 0600
+        at_write(path, "rename")
         os.replace(handle.name, path)
     except BaseException:
         Path(handle.name).unlink(missing_ok=True)
         raise
+    at_write(path, "done")
+
+
+def content_record(data: bytes) -> dict[str, Any]:
+    """Size and SHA-256 of some bytes: what a checkpoint or a summary records of a file, so that a truncated or
+    corrupted copy is told from an intact one."""
+    return {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
 
 
 def _umask() -> int:
@@ -56,6 +73,42 @@ def _umask() -> int:
 
 def atomic_write_text(path: str | Path, text: str) -> None:
     atomic_write_bytes(path, text.encode())
+
+
+def create_text_once(path: str | Path, text: str) -> bool:
+    """Create ``path`` holding ``text``, complete, unless it exists: of processes that race to create it, exactly one
+    does, and the others leave its content alone. Returns whether this call created it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle = tempfile.NamedTemporaryFile("wb", dir=path.parent, prefix=f".{path.name}.", suffix=".new", delete=False)
+    try:
+        with handle:
+            handle.write(text.encode())
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.chmod(handle.name, 0o666 & ~_umask())
+        os.link(handle.name, path)  # a hard link fails if the name exists, where a rename would replace the file
+        return True
+    except FileExistsError:
+        return False
+    finally:
+        Path(handle.name).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def exclusive_lock(path: str | Path) -> Iterator[None]:
+    """Hold an exclusive lock on the file ``path`` (created if missing) while the block runs, waiting for another
+    process that holds it. The lock goes with the process, however it ends, so a killed holder leaves none behind."""
+    import fcntl  # POSIX only; imported here so that importing this module stays portable
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def json_text(data: Any, sort_keys: bool = True) -> str:

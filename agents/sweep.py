@@ -67,9 +67,11 @@ from agents.config import (
     grid_slurm,
     read_config_file,
 )
-from agents.io import atomic_write_text, now, provenance, write_json_atomic
+from agents.io import atomic_write_text, create_text_once, now, provenance, write_json_atomic
+from agents.preemption import EXIT_PREEMPTED, StopRequests, signal_name
 
 NEW, PARTIAL, FINISHED, RUNNING = "new", "partial", "finished", "running"
+PREEMPTED = "preempted"  # an outcome: the run stopped at a checkpoint on a signal (resumable, not failed)
 EXIT_BUSY = 75  # the worker's exit status when another process trains the run (EX_TEMPFAIL)
 LOCK_FILE = ".lock"
 LOG_FILE = "stdout.log"
@@ -430,7 +432,8 @@ def prepare_run(run: SweepRun, torch_threads: int = 0) -> Path:
         config = run.config
         if config.run.torch_threads == 0 and torch_threads > 0:
             config = dataclasses.replace(config, run=dataclasses.replace(config.run, torch_threads=torch_threads))
-        atomic_write_text(path, dump_config(config))
+        # created once: two launchers with different thread counts must not replace the config a run trains with
+        create_text_once(path, dump_config(config))
     return run.run_dir
 
 
@@ -457,6 +460,8 @@ def train_run(run_dir: str | Path, echo: Echo = print) -> str:
         else:
             echo(f"{now()} {run_dir}: resuming from update {done} of {config.num_updates} ({latest.name})")
             trainer = Trainer.resume(run_dir)
+            for note in trainer.resume_notes:  # damaged checkpoints passed over
+                echo(f"warning: {note}")
         history = trainer.train()
         last = history[-1] if history else {}
         scores = ", ".join(f"{k}={v:.4g}" for k, v in last.items() if k.startswith(("charts/episodic", "eval/")))
@@ -520,7 +525,9 @@ def launch_local(
     """Train every new or partial run, ``jobs`` processes at a time, each with ``cores // jobs`` torch threads (fixed
     when the run is created). Each run's output goes to ``<run>/stdout.log`` (appended, attempt after attempt). A
     failed run does not stop the others; the outcomes say which failed. Interrupted (Ctrl-C), the runs in progress
-    are stopped and resume on the next call."""
+    are stopped and resume on the next call. Pre-empted (SIGTERM or SLURM's warning signal, :mod:`agents.preemption`),
+    it passes the signal on to the running runs, which checkpoint and exit (outcome ``preempted``), and starts no
+    other."""
     pending = [s for s in statuses(runs) if s.state in (NEW, PARTIAL)]
     if not pending:
         return []
@@ -530,32 +537,59 @@ def launch_local(
     queue = list(pending)
     running: dict[subprocess.Popen, tuple[RunStatus, Any, float]] = {}
     outcomes: list[Outcome] = []
-    total, started = len(pending), 0
-    try:
-        while queue or running:
-            while queue and len(running) < jobs:
-                status = queue.pop(0)
-                started += 1
-                prepare_run(status.run, threads)
-                log = open(status.run.run_dir / LOG_FILE, "ab")  # noqa: SIM115 (closed when the process ends)
-                log.write(f"==== {now()} sweep: {status.state} run, update {status.update}\n".encode())
-                log.flush()
-                process = subprocess.Popen(
-                    worker_command(status.run.run_dir), stdout=log, stderr=subprocess.STDOUT, env=env
-                )
-                running[process] = (status, log, time.monotonic())
-                what = "start" if status.update == 0 else f"resume at update {status.update}"
-                echo(f"[{started}/{total}] {what}: {status.run.name}  (log: {status.run.run_dir / LOG_FILE})")
-            time.sleep(poll_s)
-            for process in [p for p in running if p.poll() is not None]:
-                status, log, since = running.pop(process)
-                log.close()
-                outcome = _outcome(status.run, process.returncode, time.monotonic() - since)
-                outcomes.append(outcome)
-                echo(f"{outcome.result}: {status.run.name} ({_duration(outcome.seconds)}){_suffix(outcome.detail)}")
-    finally:
-        _stop(running)
+    with StopRequests() as stops:
+        try:
+            _run_queue(queue, running, outcomes, jobs, threads, env, stops, echo, poll_s)
+        finally:
+            _stop(running)
     return outcomes
+
+
+def _run_queue(
+    queue: list[RunStatus],
+    running: dict[subprocess.Popen, tuple[RunStatus, Any, float]],
+    outcomes: list[Outcome],
+    jobs: int,
+    threads: int,
+    env: dict[str, str],
+    stops: StopRequests,
+    echo: Echo,
+    poll_s: float,
+) -> None:
+    """:func:`launch_local`'s loop: start runs while there is room, collect the ended ones. After a pre-emption
+    signal the running runs get it too (they checkpoint and exit) and no new one starts."""
+    total, started, forwarded = len(queue), 0, False
+    while queue or running:
+        if stops.received is not None and not forwarded:
+            forwarded = True
+            echo(f"{signal_name(stops.received)}: stopping {len(running)} run(s) at their next checkpoint")
+            for process in running:
+                process.send_signal(stops.received)
+            if queue:
+                echo(f"{len(queue)} run(s) not started: re-run the same command to continue the sweep")
+            queue.clear()
+        while queue and len(running) < jobs:
+            status = queue.pop(0)
+            started += 1
+            prepare_run(status.run, threads)
+            log = open(status.run.run_dir / LOG_FILE, "ab")  # noqa: SIM115 (closed when the process ends)
+            log.write(f"==== {now()} sweep: {status.state} run, update {status.update}\n".encode())
+            log.flush()
+            process = subprocess.Popen(
+                worker_command(status.run.run_dir), stdout=log, stderr=subprocess.STDOUT, env=env
+            )
+            running[process] = (status, log, time.monotonic())
+            what = "start" if status.update == 0 else f"resume at update {status.update}"
+            echo(f"[{started}/{total}] {what}: {status.run.name}  (log: {status.run.run_dir / LOG_FILE})")
+        time.sleep(poll_s)
+        for process in [p for p in running if p.poll() is not None]:
+            status, log, since = running.pop(process)
+            log.close()
+            outcome = _outcome(status.run, process.returncode, time.monotonic() - since)
+            if forwarded and process.returncode == -stops.received_first:  # stopped before its trainer began
+                outcome = dataclasses.replace(outcome, result=PREEMPTED, detail="stopped before its first update")
+            outcomes.append(outcome)
+            echo(f"{outcome.result}: {status.run.name} ({_duration(outcome.seconds)}){_suffix(outcome.detail)}")
 
 
 def _outcome(run: SweepRun, returncode: int, seconds: float) -> Outcome:
@@ -563,6 +597,8 @@ def _outcome(run: SweepRun, returncode: int, seconds: float) -> Outcome:
         return Outcome(run, "ok", seconds=seconds)
     if returncode == EXIT_BUSY:
         return Outcome(run, "busy", "another process is training it", seconds)
+    if returncode == EXIT_PREEMPTED:
+        return Outcome(run, PREEMPTED, "stopped by a signal after a checkpoint; re-run to resume it", seconds)
     return Outcome(run, "failed", f"exit status {returncode}; {_last_error(run.run_dir / LOG_FILE)}", seconds)
 
 
@@ -914,7 +950,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     if len(args) != 1:
         print("usage: python -m agents.sweep RUN_DIR", file=sys.stderr)
         return 2
-    result = train_run(args[0], echo=lambda text: print(text, flush=True))
+    from agents.preemption import Preempted
+    from agents.trainer import TrainingDiverged, WriteFailed
+
+    try:
+        result = train_run(args[0], echo=lambda text: print(text, flush=True))
+    except Preempted as err:
+        print(f"pre-empted: {err}", flush=True)
+        return EXIT_PREEMPTED
+    except (TrainingDiverged, WriteFailed) as err:
+        print(f"error: {err}", flush=True)
+        return 1
     return EXIT_BUSY if result == "busy" else 0
 
 

@@ -37,24 +37,36 @@ from typing import Any
 import numpy as np
 import torch
 
+from agents import faults
 from agents.actor import Actor, refresh_copy, rollout_copy
 from agents.buffer import RolloutBuffer
 from agents.checkpoint import (
+    DamagedCheckpoint,
     build_agent,
     check_checkpoint_config,
     check_helm,
     checkpoint_path,
     checkpoint_update,
+    intact_checkpoint,
     latest_checkpoint,
     read_checkpoint,
     run_config,
     write_checkpoint,
 )
 from agents.config import Config, ConfigError, config_from_dict, config_to_dict, dump_config, parse_override
-from agents.evaluation import check_device, evaluate, read_records, record_means, seed_list, write_records
-from agents.io import atomic_write_text, now, provenance, write_json_atomic
+from agents.evaluation import (
+    check_device,
+    evaluate,
+    read_records,
+    record_means,
+    records_csv_text,
+    seed_list,
+    write_records,
+)
+from agents.io import atomic_write_text, content_record, now, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.ppo import explained_variance, gae_advantages, ppo_update
+from agents.preemption import Preempted, StopRequests, signal_name
 from agents.results import TRAINING_COLUMNS, config_digest
 from agents.sequences import split_sequences
 from agents.tracking import scalar_writer
@@ -64,7 +76,12 @@ EXTENDABLE = ("run.total_steps",)  # the only keys a resume may change: a longer
 
 
 class TrainingDiverged(RuntimeError):
-    """A loss or gradient became NaN/inf; the message names the last good checkpoint."""
+    """A loss, gradient or parameter became NaN/inf; the message names the update and the last good checkpoint."""
+
+
+class WriteFailed(RuntimeError):
+    """A file of the run could not be written (a full disk, a failing device); the message names it and the newest
+    checkpoint, from which the run resumes (the files written before stay whole: every write is atomic)."""
 
 
 class Trainer:
@@ -85,6 +102,7 @@ class Trainer:
         # (at update, previous num_updates) of every time the run was lengthened: the schedules need them
         self.extensions: list[tuple[int, int]] = []
         self.extension: dict[str, Any] | None = None  # the extension made by Trainer.resume, if any (run_info record)
+        self.resume_notes: list[str] = []  # damaged checkpoints Trainer.resume passed over, for the user
 
         seed = config.run.seed
         torch.manual_seed(seed)  # the weight init; every later draw uses the generators below
@@ -125,18 +143,22 @@ class Trainer:
     def resume(cls, run_dir: str | Path, overrides: Sequence[str] = ()) -> Trainer:
         """The trainer of ``run_dir`` restored from its newest checkpoint. ``overrides`` (``key=value``) may only
         raise ``run.total_steps`` (:data:`EXTENDABLE`): the run is then extended from that checkpoint on
-        (:func:`extend_run`), finished or not; any other key is a :class:`ConfigError` naming it."""
+        (:func:`extend_run`), finished or not; any other key is a :class:`ConfigError` naming it.
+
+        A damaged checkpoint (truncated or corrupted), or one whose records (``training.csv``,
+        ``eval/episodes.csv``) no longer hold what it recorded of them, is passed over for the newest intact one
+        and moved aside (``resume_notes`` says which and why); :class:`DamagedCheckpoint` naming the files when
+        none is intact."""
         run_dir = Path(run_dir)
         config = run_config(run_dir)
-        path = latest_checkpoint(run_dir)
-        if path is None:
-            raise FileNotFoundError(f"{run_dir} holds no checkpoint to resume from (checkpoints/update_*.pt)")
+        path, state, notes = intact_checkpoint(run_dir, lambda found, saved: check_run_records(run_dir, found, saved))
         extension = None
         if overrides:
             config, extension = extend_run(run_dir, config, overrides, checkpoint_update(path))
         trainer = cls(config, run_dir)
-        trainer.load_checkpoint(path)
+        trainer.load_checkpoint(path, state)
         trainer.extension = extension
+        trainer.resume_notes = [*notes, f"resuming from {path.name}"] if notes else []
         return trainer
 
     @property
@@ -159,27 +181,45 @@ class Trainer:
 
     def train(self) -> list[dict[str, float]]:
         """Run the remaining updates; returns one metrics dict per update run by this call. A finished run is left
-        exactly as it is (no resume record, no event file): lengthen it with ``Trainer.resume(dir, overrides)``."""
+        exactly as it is (no resume record, no event file): lengthen it with ``Trainer.resume(dir, overrides)``.
+
+        Stops with :class:`Preempted` after a pre-emption signal (:mod:`agents.preemption`: the update in progress
+        finishes and is checkpointed first), :class:`TrainingDiverged` at a non-finite loss, gradient or parameter,
+        and :class:`WriteFailed` when a file cannot be written; the newest checkpoint is intact in every case."""
         if self.finished:
             return []
-        self._write_run_files()
-        self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
+        with self._writing(self.run_dir / "run_info.json"):
+            self._write_run_files()
+        with self._writing(self.run_dir / "training.csv"):
+            self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
         writer = scalar_writer(_summary_writer(self.run_dir, self.global_step), self.config, self.run_dir)
         progress = _progress_bar(self.config, self.global_step)
         try:
-            while self.update < self.num_updates:
-                metrics = self.train_update()
-                self.history.append(metrics)
-                self._training_log.append(self._training_row(metrics))
-                last = self.update == self.num_updates
-                eval_interval = self.config.eval.interval
-                if eval_interval and (self.update % eval_interval == 0 or last):
-                    metrics.update(self.evaluate_now())
-                _log(writer, metrics, self.global_step)
-                _show(progress, metrics, self.recent_returns, self.config.batch_size)
-                interval = self.config.run.checkpoint_interval
-                if last or (interval and self.update % interval == 0):
-                    self.save_checkpoint()
+            with StopRequests() as stops:
+                while self.update < self.num_updates:
+                    metrics = self.train_update()
+                    self.history.append(metrics)
+                    with self._writing(self._training_log.path):
+                        self._training_log.append(self._training_row(metrics))
+                    last = self.update == self.num_updates
+                    eval_interval = self.config.eval.interval
+                    if eval_interval and (self.update % eval_interval == 0 or last):
+                        metrics.update(self.evaluate_now())
+                    _log(writer, metrics, self.global_step)
+                    _show(progress, metrics, self.recent_returns, self.config.batch_size)
+                    interval = self.config.run.checkpoint_interval
+                    saved = None
+                    if last or (interval and self.update % interval == 0):
+                        saved = self._checkpoint()
+                    if stops.received is not None and not last:  # the safe point: this update is complete
+                        saved = saved or self._checkpoint()
+                        signum = stops.received
+                        if not stops.pass_on():  # no earlier handler (submitit's) took it over: stop here
+                            raise Preempted(
+                                f"stopped by {signal_name(signum)} after update {self.update} of {self.num_updates};"
+                                f" checkpoint {saved} written: resume with scripts/train.py --resume {self.run_dir}",
+                                signum,
+                            )
         finally:
             self._training_log.close()
             self._training_log = None
@@ -187,8 +227,29 @@ class Trainer:
             if progress is not None:
                 progress.close()
         if self.update == self.num_updates:
-            self._mark_finished()
+            with self._writing(self.run_dir / "run_info.json"):
+                self._mark_finished()
         return self.history
+
+    def _checkpoint(self) -> Path:
+        with self._writing(checkpoint_path(self.run_dir, self.update)):
+            return self.save_checkpoint()
+
+    @contextlib.contextmanager
+    def _writing(self, path: Path) -> Any:
+        """Turn a failed write of ``path`` (``OSError``: a full disk, a failing fsync) into :class:`WriteFailed`."""
+        try:
+            yield
+        except OSError as err:
+            reason = f"[Errno {err.errno}] {err.strerror}" if err.errno else str(err)
+            raise WriteFailed(
+                f"training stopped at update {self.update}: writing {path} failed ({reason}); {self._kept()}; free "
+                f"space or fix the device, then resume with scripts/train.py --resume {self.run_dir}"
+            ) from err
+
+    def _kept(self) -> str:
+        last = latest_checkpoint(self.run_dir)
+        return f"the last good checkpoint is {last}" if last else "no checkpoint was written yet"
 
     def evaluate_now(self) -> dict[str, float]:
         """Evaluate the current policy on the novel seeds (the config's ``eval`` block), keep and write the records
@@ -212,7 +273,8 @@ class Trainer:
             core=self._eval_core,
         )
         self.eval_records = [r for r in self.eval_records if r["step"] != self.global_step] + records
-        write_records(self.run_dir / "eval" / "episodes.csv", self.eval_records)
+        with self._writing(self.run_dir / "eval" / "episodes.csv"):
+            write_records(self.run_dir / "eval" / "episodes.csv", self.eval_records)
         return {f"eval/{key}": value for key, value in record_means(records).items()}
 
     # ------------------------------------------------------------------------------------------- one update
@@ -244,6 +306,10 @@ class Trainer:
             )
         )
         torch.add(buffer.advantages, buffer.values, out=buffer.returns)
+        faults.signal_during(update + 1)
+        if (value := faults.update_value(update + 1, "loss")) is not None:
+            buffer.advantages.fill_(value)
+            buffer.returns.fill_(value)
         sequences = split_sequences(buffer.terminated_numpy(), self.sequence_length)
         try:
             losses = ppo_update(
@@ -258,9 +324,18 @@ class Trainer:
                 self.autocast,
             )
         except FloatingPointError as err:
-            last = latest_checkpoint(self.run_dir)
-            kept = f"the last good checkpoint is {last}" if last else "no checkpoint was written yet"
-            raise TrainingDiverged(f"training stopped at update {update + 1}: {err}; {kept}") from err
+            raise TrainingDiverged(f"training stopped at update {update + 1}: {err}; {self._kept()}") from err
+        if (value := faults.update_value(update + 1, "params")) is not None:
+            with torch.no_grad():
+                next(self.model.parameters()).view(-1)[0] = value
+        # The loss and gradient were finite, but the last optimizer step can still overflow a weight: checked here,
+        # or the next rollout would sample from NaN probabilities
+        bad = non_finite_parameters(self.model)
+        if bad:
+            raise TrainingDiverged(
+                f"training stopped at update {update + 1}: non-finite parameters after its optimizer steps "
+                f"({', '.join(bad[:3])}{', ...' if len(bad) > 3 else ''}); {self._kept()}"
+            )
         refresh_copy(self.rollout_model, self.model)
         self.update += 1
         self.global_step += config.batch_size
@@ -347,7 +422,7 @@ class Trainer:
     def save_checkpoint(self) -> Path:
         """Write ``checkpoints/update_NNNNNNN.pt`` atomically and prune old ones; returns the checkpoint's path.
         ``training.csv`` already holds this update's row (appended after every update); it is synced to disk here."""
-        if not all(torch.isfinite(p).all() for p in self.model.parameters()):
+        if non_finite_parameters(self.model):
             raise TrainingDiverged(f"non-finite weights at update {self.update}; no checkpoint written")
         state = {
             "update": self.update,
@@ -373,11 +448,14 @@ class Trainer:
         }
         if self._training_log is not None:
             self._training_log.sync()
+        # what the run's records held at this checkpoint: a resume refuses records truncated or corrupted since
+        state["records"] = run_records(self.run_dir, self.global_step)
         keep = self.config.run.keep_checkpoints
         return write_checkpoint(checkpoint_path(self.run_dir, self.update), state, keep)
 
-    def load_checkpoint(self, path: str | Path) -> None:
-        state = read_checkpoint(path)
+    def load_checkpoint(self, path: str | Path, state: dict[str, Any] | None = None) -> None:
+        """Restore the trainer from the checkpoint at ``path`` (``state``: its content, when already read)."""
+        state = read_checkpoint(path) if state is None else state
         lengthened_from = check_checkpoint_config(state, self.config, path)  # config.yaml may hold a longer run
         check_helm(self.helm, state, path)
         self.update, self.global_step = state["update"], state["global_step"]
@@ -398,9 +476,7 @@ class Trainer:
         self.recent_returns = deque(state["recent_returns"], maxlen=RECENT_EPISODES)
         # What a killed run wrote after this checkpoint is dropped, so the files hold what an uninterrupted run holds
         # (training.csv's rows past it are dropped when train() opens the file: TrainingLog)
-        evaluated = self.run_dir / "eval" / "episodes.csv"
-        if evaluated.is_file():
-            self.eval_records = [r for r in read_records(evaluated) if r["step"] <= self.global_step]
+        self.eval_records = evaluation_records(self.run_dir / "eval" / "episodes.csv", self.global_step)
 
     # ------------------------------------------------------------------------------------------- run files
     def _mark_finished(self) -> None:
@@ -475,12 +551,7 @@ class TrainingLog:
 
     def __init__(self, path: Path, step: int, columns: tuple[str, ...] = TRAINING_COLUMNS) -> None:
         self.path = path
-        kept = [row for row in _complete_rows(path) if int(row["step"]) <= step] if step > 0 else []
-        text = io.StringIO()
-        rewrite = csv.DictWriter(text, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
-        rewrite.writeheader()
-        rewrite.writerows(kept)
-        atomic_write_text(path, text.getvalue())
+        atomic_write_text(path, training_log_text(path, step, columns))
         self._handle = open(path, "a", newline="")  # noqa: SIM115 (held open across updates, closed by close())
         self._writer = csv.DictWriter(self._handle, fieldnames=list(columns), lineterminator="\n")
 
@@ -494,6 +565,63 @@ class TrainingLog:
 
     def close(self) -> None:
         self._handle.close()
+
+
+def training_log_text(path: Path, step: int, columns: tuple[str, ...] = TRAINING_COLUMNS) -> str:
+    """``training.csv`` as it is up to ``step``: the header and the complete rows of steps up to ``step``."""
+    kept = [row for row in _complete_rows(path) if int(row["step"]) <= step] if step > 0 else []
+    text = io.StringIO()
+    rewrite = csv.DictWriter(text, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
+    rewrite.writeheader()
+    rewrite.writerows(kept)
+    return text.getvalue()
+
+
+RECORDED_FILES = ("training.csv", "eval/episodes.csv")  # what a checkpoint records of its run's files
+
+
+def evaluation_records(path: Path, step: int) -> list[dict[str, Any]]:
+    """The in-training evaluation records up to ``step`` (none without the file); a row cut short is left out."""
+    if not path.is_file():
+        return []
+    return [record for record in read_records(path, skip_malformed=True) if record["step"] <= step]
+
+
+def _records_text(path: Path, step: int) -> str:
+    if path.name == "training.csv":
+        return training_log_text(path, step)
+    return records_csv_text(evaluation_records(path, step))
+
+
+def run_records(run_dir: Path, step: int) -> dict[str, dict[str, Any]]:
+    """Size and SHA-256 of what the run's records (:data:`RECORDED_FILES`) hold up to ``step`` as they are read back
+    (what a killed run wrote later does not count; a missing file holds nothing): stored in every checkpoint."""
+    return {name: content_record(_records_text(run_dir / name, step).encode()) for name in RECORDED_FILES}
+
+
+def check_run_records(run_dir: Path, path: Path, state: dict[str, Any]) -> None:
+    """:class:`DamagedCheckpoint` unless the run's records still hold what the checkpoint ``state`` (at ``path``)
+    recorded of them: a truncated or corrupted training.csv or eval/episodes.csv is never continued."""
+    step = state["global_step"]
+    for name, recorded in state.get("records", {}).items():
+        file = run_dir / name
+        try:
+            found = content_record(_records_text(file, step).encode())
+        except (OSError, ValueError, KeyError, TypeError, csv.Error):  # a row garbled beyond parsing
+            found = None
+        if found != recorded:
+            what = "is missing" if not file.is_file() else "does not hold what it recorded of it"
+            raise DamagedCheckpoint(
+                f"{file} {what} (the rows up to step {step}: {recorded['bytes']} bytes, SHA-256 "
+                f"{recorded['sha256'][:12]}...), so {path} cannot be continued: the file was truncated or corrupted"
+            )
+
+
+def non_finite_parameters(model: torch.nn.Module) -> list[str]:
+    """The names of the parameters that hold a NaN or an infinity (one device sync)."""
+    named = list(model.named_parameters())
+    finite = torch.stack([torch.isfinite(p).all() for _, p in named]).cpu()
+    return [name for (name, _), ok in zip(named, finite.tolist(), strict=True) if not ok]
 
 
 def _complete_rows(path: Path) -> list[dict[str, Any]]:

@@ -16,6 +16,12 @@ The default seeds are the run's ``eval`` seeds (30 right after ``env.train_seeds
 the resolved inclusive range is printed, and seeds that overlap the training range are refused. ``--video DIR``
 writes GIFs of the first episodes: the agent's view beside the ground truth, with the step, action, reward and
 running return.
+
+Several evaluations may write into one --out directory at once: each merges into what is there when it ends (under a
+lock on OUT/.lock), so the directory ends with every record. summary.json records the size and SHA-256 of the files
+beside it; a truncated or corrupted episodes.csv or training.csv is refused by name. SIGTERM (or SIGUSR2) stops an
+evaluation with exit status 76, never in the middle of writing its files. Exit status: 0 done, 2 bad input, 76
+pre-empted.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 
 from agents.config import ConfigError  # noqa: E402
 from agents.evaluation import check_device, evaluate_runs, parse_seed_range  # noqa: E402
+from agents.preemption import EXIT_PREEMPTED, Preempted, raising_preempted  # noqa: E402
 from agents.results import format_table  # noqa: E402
 
 SEED_LIMIT = 2**63 - 1  # torch's generator takes seeds up to here
@@ -106,26 +113,30 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("give --out DIR when evaluating several runs")
     out = Path(args.out) if args.out else Path(args.run[0]) / "evaluation"
     try:
-        summary = evaluate_runs(
-            [Path(run) for run in args.run],
-            out,
-            seeds=args.seeds,
-            repetitions=args.repetitions,
-            checkpoints=args.checkpoints,
-            greedy=args.greedy,
-            sampling_seed=args.sampling_seed,
-            method=args.method,
-            task=args.task,
-            video=Path(args.video) if args.video else None,
-            videos=args.videos,
-            device=args.device,
-            progress=not args.no_progress,
-            force=args.force,
-            echo=print,
-        )
+        with raising_preempted("evaluation"):
+            summary = evaluate_runs(
+                [Path(run) for run in args.run],
+                out,
+                seeds=args.seeds,
+                repetitions=args.repetitions,
+                checkpoints=args.checkpoints,
+                greedy=args.greedy,
+                sampling_seed=args.sampling_seed,
+                method=args.method,
+                task=args.task,
+                video=Path(args.video) if args.video else None,
+                videos=args.videos,
+                device=args.device,
+                progress=not args.no_progress,
+                force=args.force,
+                echo=print,
+            )
     except (ConfigError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    except Preempted as err:
+        print(f"pre-empted: {err}; {out} holds what was written before, whole; run it again", file=sys.stderr)
+        return EXIT_PREEMPTED
     print(format_table(summary["runs"], ["run", "method", "task", "step", "episodes", "mean", "iqm", "metric"]))
     print(format_table(summary["aggregate"]))
     written = [out / name for name in ("episodes.csv", "training.csv", "summary.json") if (out / name).is_file()]

@@ -32,7 +32,12 @@ local launcher and SLURM submission alike; ``--evaluate`` still writes each sele
 finished runs, so a selection never replaces a panel's table with a part of it.
 
 ``--set KEY=VALUE`` applies to every run, after the grid; ``--set grid.AXIS=VALUES`` replaces an axis (e.g.
-``--set grid.run.seed=[0]``). Exit status: 0 done, 1 some run failed, 2 bad config or arguments.
+``--set grid.run.seed=[0]``).
+
+SIGTERM (or SLURM's warning signal, SIGUSR2) to this command stops the local launcher: every running run gets the
+signal, finishes its update, writes a checkpoint and exits; no further run starts. Two sweeps on the same --root never
+train one run at once (each run directory is locked while it trains; the other finds it busy and leaves it).
+Exit status: 0 done, 1 some run failed, 2 bad config or arguments, 76 pre-empted (re-run to resume).
 """
 
 from __future__ import annotations
@@ -45,8 +50,17 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.config import NAMED_AXES, ConfigError  # noqa: E402
+from agents.preemption import EXIT_PREEMPTED  # noqa: E402
 from agents.slurm import launch_slurm, wait_for_jobs  # noqa: E402
-from agents.sweep import SweepError, describe, evaluate_panel, launch_local, load_panel, select_runs  # noqa: E402
+from agents.sweep import (  # noqa: E402
+    PREEMPTED,
+    SweepError,
+    describe,
+    evaluate_panel,
+    launch_local,
+    load_panel,
+    select_runs,
+)
 
 # --slurm-* options -> grid.slurm keys, and whether the value is text (quoted so YAML keeps it a string)
 SLURM_OPTIONS = {
@@ -108,7 +122,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.dry_run:
             print(describe(selected), end="")
             return 0
-        failed = [] if args.no_train else _train(selected, args)
+        outcomes = [] if args.no_train else _train(selected, args)
+        failed = [outcome for outcome in outcomes if outcome.result == "failed"]
+        preempted = [outcome for outcome in outcomes if outcome.result == PREEMPTED]
         if args.evaluate:
             chosen = {panel.name for panel in selected}
             for panel in panels:  # the whole panel: its results gather every finished run, whatever --only picked
@@ -126,11 +142,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {outcome.run.name}: {outcome.detail}", file=sys.stderr)
         print("re-run the same command to retry them (finished runs are skipped)", file=sys.stderr)
         return 1
+    if preempted:
+        print(f"pre-empted: {len(preempted)} run(s) stopped at a checkpoint; re-run the same command to resume them")
+        return EXIT_PREEMPTED
     return 0
 
 
 def _train(panels: list, args: argparse.Namespace) -> list:
-    """Launch the panels' unfinished runs; the outcomes that failed."""
+    """Launch the panels' unfinished runs; their outcomes."""
     if args.launcher == "local":
         runs = [run for panel in panels for run in panel.runs]
         outcomes = launch_local(runs, args.jobs)
@@ -146,7 +165,7 @@ def _train(panels: list, args: argparse.Namespace) -> list:
             return []
         print(f"waiting for {len(submitted)} job(s) (Ctrl-C stops waiting; the jobs go on)")
         outcomes = wait_for_jobs(submitted, poll_s=args.slurm_poll)
-    return [outcome for outcome in outcomes if outcome.result == "failed"]
+    return outcomes
 
 
 def _only_hint(overrides: list[str]) -> str:

@@ -3,9 +3,16 @@
 ``--resume DIR`` continues a run from its newest checkpoint with the config saved in DIR; a finished run is left as
 it is (exit 0). ``--resume DIR --set run.total_steps=N`` lengthens a run, finished or not, to N steps (the only key
 a resume may change); the schedules that decay over the whole run go on from their current values to their final
-values at the new end. The run directory (default ``runs/<config name>/<timestamp>-seed<seed>``) receives the
-resolved config, run_info.json (seed, versions, git revision, resumes and extensions), training.csv, TensorBoard
-events and checkpoints.
+values at the new end.
+
+Exit status: 0 done (or finished already), 1 the run stopped on a non-finite loss or parameter or a failed write (the
+message names the update or file; the newest checkpoint is intact), 2 bad arguments, config or run directory (a
+damaged checkpoint with no intact one to fall back to is named), 76 pre-empted: SIGTERM or SLURM's warning signal
+(SIGUSR2) stopped the run after its current update, which was checkpointed (resume it). Faults can be injected for
+tests through the MEMGYM_FAULT environment variable (agents/faults.py).
+
+The run directory (default ``runs/<config name>/<timestamp>-seed<seed>``) receives the resolved config, run_info.json
+(seed, versions, git revision, resumes and extensions), training.csv, TensorBoard events and checkpoints.
 """
 
 from __future__ import annotations
@@ -19,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 
 from agents.checkpoint import checkpoint_update, latest_checkpoint, run_config  # noqa: E402
 from agents.config import ConfigError, load_config, rounding_notice  # noqa: E402
-from agents.trainer import Trainer, TrainingDiverged, default_run_dir  # noqa: E402
+from agents.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
+from agents.trainer import Trainer, TrainingDiverged, WriteFailed, default_run_dir  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -54,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    for note in trainer.resume_notes:  # damaged checkpoints passed over
+        print(f"warning: {note}", file=sys.stderr, flush=True)
     if trainer.extension is not None:
         print(_extension_message(trainer.extension), flush=True)
     notice = rounding_notice(trainer.config)
@@ -62,9 +72,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"run directory: {trainer.run_dir}", flush=True)
     try:
         history = trainer.train()
-    except TrainingDiverged as err:
+    except (TrainingDiverged, WriteFailed) as err:
         print(f"error: {err}", file=sys.stderr)
         return 1
+    except Preempted as err:
+        print(f"pre-empted: {err}", file=sys.stderr)
+        return EXIT_PREEMPTED
     if history:
         last = history[-1]
         summary = {k: v for k, v in last.items() if k.startswith(("charts/episodic", "env/"))}

@@ -14,6 +14,7 @@ import torch
 import envs
 from agents.config import ConfigError, config_from_dict, task_name
 from agents.evaluation import evaluate, seed_list
+from agents.memory import MEMORY_MODULES
 from agents.metrics import metric_of
 from agents.trainer import Trainer
 from envs.gymnasium_core import GymnasiumCore, SeedingError, UnsupportedSpaceError
@@ -116,6 +117,29 @@ def test_time_limits_end_episodes_as_truncated() -> None:
     assert ends[-1][2][0]["truncated"] == 1 and ends[-1][2][0]["length"] == 20
 
 
+def test_wrappers_apply_in_order_with_their_arguments() -> None:
+    wrappers = [  # the first is innermost: the statistics see the episodes the time limit cuts
+        {"path": "gymnasium.wrappers:TimeLimit", "kwargs": {"max_episode_steps": 4}},
+        "gymnasium.wrappers:RecordEpisodeStatistics",
+    ]
+    core = envs.make_core(ENV_ID, 1, make_kwargs={"delay": 50}, wrappers=wrappers)
+    core.reset_slots([0], [0])
+    ends = [core.step(np.zeros(1, dtype=np.int64)) for _ in range(4)]
+    assert [bool(ended[0]) for _, ended, _ in ends] == [False] * 3 + [True]
+    final = ends[-1][2][0]
+    assert final["truncated"] == 1 and final["length"] == 4
+    assert final["episode.l"] == 4 and final["episode.r"] == 0.0  # RecordEpisodeStatistics' nested info
+    own = envs.make_core("ProofOfMemory-v0", 2, wrappers=wrappers)  # one of this project's ids, wrapped
+    assert (
+        isinstance(own, GymnasiumCore)
+        and own.single_observation_space == envs.make_core("ProofOfMemory-v0").single_observation_space
+    )
+    with pytest.raises(ValueError, match="wrapper 'gymnasium.wrappers:Nope' cannot be imported"):
+        envs.make_core(ENV_ID, 1, wrappers=["gymnasium.wrappers:Nope"])
+    with pytest.raises(ValueError, match="wrapper 7 is invalid: expected an import path"):
+        envs.make_core(ENV_ID, 1, wrappers=[7])
+
+
 # -------------------------------------------------------------------------------------------------------- spaces
 def test_observation_spaces_become_image_and_vector_inputs() -> None:
     discrete = _core(2, observation="discrete")
@@ -214,6 +238,15 @@ def test_the_baselines_train_on_every_kind_of_space(tmp_path: Path, overrides: t
     assert "eval/return" in history[-1] and history[-1]["charts/episodes"] > 0
     for core in (trainer.core, trainer._eval_core):  # the async copies' subprocesses end here, not at exit
         core.close()
+
+
+@pytest.mark.parametrize("memory", sorted(MEMORY_MODULES))
+def test_every_memory_trains_on_a_gymnasium_environment(tmp_path: Path, memory: str) -> None:
+    small = ("model.trxl.layers=1", "model.trxl.dim=16", "model.trxl.heads=2", "model.trxl.memory_length=4")
+    length = "ppo.sequence_length=max" if memory == "none" else "ppo.sequence_length=4"
+    config = _config("run.total_steps=512", "run.worker_steps=16", f"model.memory={memory}", length, *small)
+    history = Trainer(config, tmp_path / "run").train()
+    assert len(history) == 2 and all(np.isfinite(m["losses/policy_loss"]) for m in history)
 
 
 def _kill_after(trainer: Trainer, updates: int) -> None:

@@ -22,9 +22,15 @@ CHECKED = [
     *(f"scripts/reference/{module}.py" for module in [*REFERENCE_VENV_MODULES, "venv"]),
     "agents/__init__.py",
     "agents/io.py",
+    "agents/faults.py",  # the fault-injection hooks of agents/io.py
 ]
 ALLOWED_THIRD_PARTY = {"numpy", "gymnasium", "memory_gym"}
-ALLOWED_FIRST_PARTY = {"agents.io", "scripts.reference", *(f"scripts.reference.{m}" for m in REFERENCE_VENV_MODULES)}
+ALLOWED_FIRST_PARTY = {
+    "agents.io",
+    "agents.faults",
+    "scripts.reference",
+    *(f"scripts.reference.{m}" for m in REFERENCE_VENV_MODULES),
+}
 
 
 def imported_modules(path: Path) -> set[str]:

@@ -1,0 +1,103 @@
+"""scripts/sweep.py under faults, for real: SIGTERM to the local launcher (every running run checkpoints, the sweep
+exits 76 and the same command resumes it), and two sweeps on one root at once (no run trained twice)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from agents.checkpoint import checkpoint_update, latest_checkpoint
+from agents.preemption import EXIT_PREEMPTED
+from agents.sweep import FINISHED, load_panel, run_status
+from scripts import sweep as sweep_script
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = {
+    "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
+    "model": {"memory": "gru", "memory_size": 16, "hidden_size": 16, "vector_encoder_size": 8},
+    "ppo": {"epochs": 1, "minibatches": 1},
+    "run": {
+        "total_steps": 3 * 64,
+        "workers": 4,
+        "worker_steps": 16,
+        "torch_threads": 0,  # fixed by the launcher when it creates the run: its share of the cores
+        "progress_bar": False,
+        "checkpoint_interval": 0,  # a checkpoint at the end only (and at a pre-emption)
+    },
+}
+
+
+def _write(path: Path, seeds: list[int], **run: object) -> Path:
+    base = {**TINY, "run": {**TINY["run"], **run}}
+    path.write_text(yaml.safe_dump({**base, "grid": {"run.seed": seeds}}, sort_keys=False))
+    return path
+
+
+def _steps(run_dir: Path) -> list[int]:
+    with open(run_dir / "training.csv", newline="") as handle:
+        return [int(row["step"]) for row in csv.DictReader(handle)]
+
+
+def _sweep(config: Path, root: Path, jobs: int) -> subprocess.Popen:
+    script = str(ROOT / "scripts" / "sweep.py")
+    command = [sys.executable, script, str(config), "--root", str(root), "--jobs", str(jobs)]
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+
+
+@pytest.mark.slow
+def test_sigterm_to_the_local_launcher_checkpoints_every_running_run(tmp_path: Path) -> None:
+    config = _write(tmp_path / "preempt.yaml", [0, 1], total_steps=40 * 64)
+    root = tmp_path / "runs"
+    runs = load_panel(config, root=root).runs
+    sweep = _sweep(config, root, jobs=2)
+    try:
+        deadline = time.monotonic() + 180
+        while not all((run.run_dir / "training.csv").is_file() and _steps(run.run_dir) for run in runs):
+            assert sweep.poll() is None and time.monotonic() < deadline, "the runs never started"
+            time.sleep(0.05)
+        sweep.send_signal(signal.SIGTERM)  # to the launcher only: it passes the signal on
+        output, _ = sweep.communicate(timeout=180)
+    finally:
+        if sweep.poll() is None:
+            sweep.kill()
+    assert sweep.returncode == EXIT_PREEMPTED, output
+    assert "SIGTERM: stopping 2 run(s) at their next checkpoint" in output
+    assert output.count("preempted: ") == 2 and "failed" not in output
+    for run in runs:
+        update = checkpoint_update(latest_checkpoint(run.run_dir))
+        assert 1 <= update < 40 and len(_steps(run.run_dir)) == update
+        assert f"pre-empted: stopped by SIGTERM after update {update} of 40" in (run.run_dir / "stdout.log").read_text()
+
+    assert sweep_script.main([str(config), "--root", str(root), "--jobs", "2"]) == 0
+    for run in runs:
+        assert run_status(run).state == FINISHED
+        assert _steps(run.run_dir) == [64 * k for k in range(1, 41)]  # nothing lost, nothing twice
+        resumed = json.loads((run.run_dir / "run_info.json").read_text())["resumed"]
+        assert len(resumed) == 1
+
+
+@pytest.mark.slow
+def test_two_sweeps_on_one_root_never_train_a_run_twice(tmp_path: Path) -> None:
+    config = _write(tmp_path / "twice.yaml", [0, 1, 2])
+    root = tmp_path / "runs"
+    sweeps = [_sweep(config, root, jobs=1), _sweep(config, root, jobs=2)]  # different thread shares
+    outputs = [sweep.communicate(timeout=300)[0] for sweep in sweeps]
+    assert [sweep.returncode for sweep in sweeps] == [0, 0], outputs
+    for run in load_panel(config, root=root).runs:
+        assert run_status(run).state == FINISHED
+        log = (run.run_dir / "stdout.log").read_text()
+        assert log.count("training 3 updates from scratch") == 1, log
+        assert "resuming" not in log
+        assert _steps(run.run_dir) == [64, 128, 192]
+        assert "resumed" not in json.loads((run.run_dir / "run_info.json").read_text())
+        threads = yaml.safe_load((run.run_dir / "config.yaml").read_text())["run"]["torch_threads"]
+        assert threads >= 1
+    assert not [path for path in root.rglob("*.tmp")] and not [path for path in root.rglob("*.new")]
