@@ -12,7 +12,8 @@ variable on a ``scripts/train.py``, ``scripts/sweep.py`` or ``scripts/evaluate.p
     file exists), ``data`` (half of the bytes written), ``fsync`` (all written, not yet flushed to disk), ``rename``
     (flushed, not yet in place) or ``done`` (in place); do ``<action>``: ``kill`` (SIGKILL this process), ``enospc``
     (fail with ``OSError`` ENOSPC, as a full disk does) or ``eio`` (fail with ``OSError`` EIO, as a failing fsync
-    does). Example: ``write:update_*.pt:2:fsync:eio``.
+    does), or ``sigterm`` / ``sigusr2`` (send that signal to this process and go on: a pre-emption that arrives in
+    the middle of a write). Example: ``write:update_*.pt:2:fsync:eio``.
 ``update:<n>:<target>:<value>``
     at update ``n`` (1-based) put ``<value>`` (``nan`` or ``inf``) into ``<target>``: ``loss`` (the rollout's
     advantages and returns, so the PPO loss is non-finite) or ``params`` (one weight, after the update's last
@@ -35,7 +36,7 @@ from pathlib import Path
 
 ENV_VARIABLE = "MEMGYM_FAULT"
 WRITE_STAGES = ("open", "data", "fsync", "rename", "done")
-WRITE_ACTIONS = ("kill", "enospc", "eio")
+WRITE_ACTIONS = ("kill", "enospc", "eio", "sigterm", "sigusr2")
 UPDATE_TARGETS = ("loss", "params")
 UPDATE_VALUES = {"nan": float("nan"), "inf": float("inf")}
 SIGNALS = ("SIGTERM", "SIGUSR2", "SIGINT", "SIGKILL")
@@ -127,6 +128,9 @@ def at_write(path: Path, stage: str) -> None:
             continue
         if fault.action == "kill":
             os.kill(os.getpid(), signal.SIGKILL)
+        if fault.action in ("sigterm", "sigusr2"):
+            os.kill(os.getpid(), getattr(signal, fault.action.upper()))
+            continue
         code = errno.ENOSPC if fault.action == "enospc" else errno.EIO
         raise OSError(code, f"{os.strerror(code)} (injected by {ENV_VARIABLE} at {stage})", str(path))
 

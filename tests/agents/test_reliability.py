@@ -87,7 +87,7 @@ def _no_debris(run_dir: Path) -> None:
 @pytest.mark.parametrize(
     ("spec", "message"),
     [
-        ("write:*.pt:1:fsync:explode", "action 'explode' is invalid; valid: kill, enospc, eio"),
+        ("write:*.pt:1:fsync:explode", "action 'explode' is invalid; valid: kill, enospc, eio, sigterm, sigusr2"),
         ("write:*.pt:1:middle:kill", "stage 'middle' is invalid; valid: open, data, fsync, rename, done"),
         ("write:*.pt:0:data:kill", "'0' is invalid; expected a whole number >= 1"),
         ("update:2:weights:nan", "target 'weights' is invalid; valid: loss, params"),
@@ -320,6 +320,17 @@ def test_a_preempted_run_checkpoints_exits_76_and_resumes_bit_for_bit(
     _assert_same_run(uninterrupted, run_dir)
 
 
+def test_a_signal_in_the_middle_of_a_checkpoint_write_stops_after_it(tmp_path: Path, uninterrupted: Path) -> None:
+    run_dir = tmp_path / "run"
+    stopped = _run(_train_command(tmp_path, run_dir), "write:update_*.pt:2:data:sigterm")
+    assert stopped.returncode == EXIT_PREEMPTED, stopped.stderr
+    assert "stopped by SIGTERM after update 4 of 6" in stopped.stderr
+    names = sorted(path.name for path in (run_dir / "checkpoints").iterdir())
+    assert names == ["update_0000002.pt", "update_0000004.pt"]
+    Trainer.resume(run_dir).train()
+    _assert_same_run(uninterrupted, run_dir)
+
+
 def test_sigterm_from_outside_stops_at_the_next_update(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     command = _train_command(tmp_path, run_dir, total_steps=40 * 64, checkpoint_interval=0)
@@ -368,6 +379,39 @@ def two_runs(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
         Trainer(_config(seed=seed, total_steps=2 * 64), run_dir).train()
         runs.append(run_dir)
     return runs
+
+
+def _evaluate_command(run_dir: Path, out: Path) -> list[str]:
+    return [sys.executable, str(ROOT / "scripts" / "evaluate.py"), "--run", str(run_dir), "--out", str(out)]
+
+
+@pytest.mark.parametrize(("write", "runs"), [(1, {"seed0"}), (2, {"seed0", "seed1"})])
+def test_a_preempted_evaluation_leaves_its_files_whole_and_together(
+    tmp_path: Path, two_runs: list[Path], write: int, runs: set[str]
+) -> None:
+    """SIGTERM while the merged records are checked (the 1st episodes.csv written, in a scratch directory) stops
+    the evaluation before out is touched; while out's episodes.csv is half written (the 2nd), it is held back until
+    summary.json is written too."""
+    out = tmp_path / "out"
+    evaluate_runs([two_runs[0]], out)
+    stopped = _run(_evaluate_command(two_runs[1], out), f"write:episodes.csv:{write}:data:sigterm")
+    assert stopped.returncode == EXIT_PREEMPTED, stopped.stderr
+    assert "pre-empted: evaluation stopped by SIGTERM" in stopped.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert {entry["run"] for entry in summary["run_directories"]} == runs
+    evaluation._existing(out)  # every file is what summary.json recorded
+    assert {record["run"] for record in read_records(out / "episodes.csv")} == runs
+
+
+def test_an_evaluation_killed_between_its_writes_is_refused_by_name(tmp_path: Path, two_runs: list[Path]) -> None:
+    out = tmp_path / "out"
+    evaluate_runs([two_runs[0]], out)
+    before = (out / "summary.json").read_text()
+    killed = _run(_evaluate_command(two_runs[1], out), "write:summary.json:1:rename:kill")
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    assert (out / "summary.json").read_text() == before  # episodes.csv was replaced, summary.json not
+    with pytest.raises(ValueError, match=r"episodes.csv is not what summary.json recorded.*killed between"):
+        evaluate_runs([two_runs[1]], out, force=True)
 
 
 def test_two_evaluations_into_one_directory_at_once_keep_every_record(
