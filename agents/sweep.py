@@ -40,6 +40,7 @@ import json
 import os
 import re
 import shutil
+import socket
 import subprocess
 import sys
 import time
@@ -406,7 +407,8 @@ def _locked(run_dir: Path) -> bool:
 @contextlib.contextmanager
 def run_lock(run_dir: Path) -> Iterator[bool]:
     """Hold ``<run>/.lock`` exclusively while training; yields False (holding nothing) when another process has it.
-    The lock goes with the process, however it ends."""
+    The lock goes with the process, however it ends (a killed holder leaves no stale lock); while held, the file
+    names its holder (host and process id) for :func:`lock_holder`."""
     import fcntl
 
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -416,10 +418,21 @@ def run_lock(run_dir: Path) -> Iterator[bool]:
         except BlockingIOError:
             yield False
             return
+        handle.truncate(0)
+        handle.write(f"{socket.gethostname()} pid {os.getpid()}\n")
+        handle.flush()
         try:
             yield True
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def lock_holder(run_dir: Path) -> str:
+    """Who holds (or last held) the run's lock, as its lock file says: ``host pid N``, or ``unknown``."""
+    try:
+        return (run_dir / LOCK_FILE).read_text().strip() or "unknown"
+    except OSError:
+        return "unknown"
 
 
 # ---------------------------------------------------------------------------------------- creating, training
@@ -445,7 +458,7 @@ def train_run(run_dir: str | Path, echo: Echo = print) -> str:
     run_dir = Path(run_dir)
     with run_lock(run_dir) as held:
         if not held:
-            echo(f"{run_dir}: another process is training this run; leaving it")
+            echo(f"{run_dir}: another process ({lock_holder(run_dir)}) is training this run; leaving it")
             return "busy"
         config = run_config(run_dir)
         latest = latest_checkpoint(run_dir)

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -16,7 +18,7 @@ import yaml
 
 from agents.checkpoint import checkpoint_update, latest_checkpoint
 from agents.preemption import EXIT_PREEMPTED
-from agents.sweep import FINISHED, load_panel, run_status
+from agents.sweep import FINISHED, load_panel, prepare_run, run_lock, run_status, train_run
 from scripts import sweep as sweep_script
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -101,3 +103,16 @@ def test_two_sweeps_on_one_root_never_train_a_run_twice(tmp_path: Path) -> None:
         threads = yaml.safe_load((run.run_dir / "config.yaml").read_text())["run"]["torch_threads"]
         assert threads >= 1
     assert not [path for path in root.rglob("*.tmp")] and not [path for path in root.rglob("*.new")]
+
+
+def test_a_busy_run_is_left_alone_and_its_holder_named(tmp_path: Path) -> None:
+    (run,) = load_panel(_write(tmp_path / "busy.yaml", [0]), root=tmp_path / "runs").runs
+    prepare_run(run)
+    said: list[str] = []
+    with run_lock(run.run_dir) as held:
+        assert held
+        assert train_run(run.run_dir, echo=said.append) == "busy"
+    assert said == [
+        f"{run.run_dir}: another process ({socket.gethostname()} pid {os.getpid()}) is training this run; leaving it"
+    ]
+    assert not (run.run_dir / "checkpoints").exists()
