@@ -9,10 +9,11 @@ How it is computed: a **chunked scan**. Time is cut into n chunks of C ~ sqrt(T)
 from a zero state inside every chunk at once (C steps, each over all chunks), (2) the n chunk ends are chained from
 the start state (n steps over (S, D)), (3) each chunk's carried-in state is added, scaled by the cumulative product
 of the chunk's decays (one product, one multiply-add). That is 2 sqrt(T) small sequential steps instead of T, and
-about three times the elementwise work of a plain loop. Measured on this project's 2-core CPU
-(``scripts/benchmark_memories.py``, S=16, D=128 complex), it beats both alternatives: a step-by-step loop pays T
-Python-level steps, and a log-depth associative (Hillis-Steele) scan does log2(T) passes over the whole (S, T, D)
-tensor, which on a CPU costs more memory traffic than the chunked scan's three passes once T exceeds a few hundred.
+about three times the elementwise work of a plain loop. Measured on this project's 2-core CPU (one thread, S=16,
+D=128, forward only): at T=1,024 the chunked scan took 8 ms, a step-by-step loop 12 ms and a log-depth associative
+(Hillis-Steele) scan about ten times the chunked one, which does log2(T) passes over the whole (S, T, D) tensor: on a
+CPU, memory traffic, not depth, is the cost. The larger gain is the backward pass: the loop's autograd graph has T
+nodes per tensor, the reverse scan below is one more chunked scan.
 Closed forms through cumulative sums (``b / prod(a)``) are not used: with strong decays the products underflow and
 the division overflows; the chunked scan only ever multiplies by |a| <= 1 products, so it neither overflows nor loses
 precision on long sequences (tested at 4,096 steps and beyond).
