@@ -42,6 +42,9 @@ def rollout_copy(model: ActorCritic, precision: str) -> ActorCritic:
 
 
 def refresh_copy(acting: ActorCritic, model: ActorCritic) -> None:
+    """Called after every change of the model's weights (an update, a checkpoint load): copies them into a bf16
+    acting copy, and marks the memory's acting caches built from the old ones stale (``weights_generation``)."""
+    acting.weights_generation += 1
     if acting is not model:
         with torch.no_grad():
             for low, weight in zip(acting.parameters(), model.parameters(), strict=True):
@@ -115,6 +118,9 @@ class Actor:
         self.active = np.ones(self.num_envs, dtype=bool)  # slots still playing (evaluation stops finished ones)
         self.seed_source: SeedSource | None = None
         self.memory = self._empty_memory()
+        # The memory's acting cache (Memory.acting_cache), the state it matches and the weights_generation it was
+        # built with; derived from the state, so never checkpointed.
+        self._acting_cache: tuple[Any, Tensor | None, int] = (None, None, -1)
         self.helm_features = None if helm is None else torch.zeros((self.num_envs, helm.output_size), device=device)
 
     # ------------------------------------------------------------------------------------------------- episodes
@@ -134,9 +140,12 @@ class Actor:
         state, episode_step = self.memory.recurrent, self.memory.episode_step
         with torch.inference_mode():
             if self.active.all():
-                logits, values, next_state = self.model.step(inputs, state, episode_step)
+                cache = self._cache(state, episode_step)
+                logits, values, next_state = self.model.step(inputs, state, episode_step, cache)
+                self._acting_cache = (cache, next_state, self.model.weights_generation)  # the step advanced it
                 actions, log_probs = choose_actions(logits, self.generator, greedy)
             else:
+                self._acting_cache = (None, None, -1)  # the stopped slots do not step: built anew when all do
                 rows = torch.from_numpy(np.flatnonzero(self.active)).to(self.device)
                 some = {name: tensor.index_select(0, rows) for name, tensor in inputs.items()}
                 logits, some_values, some_state = self.model.step(
@@ -171,6 +180,9 @@ class Actor:
         alive = ~terminated_t
         next_state = decision.next_state.to(self.model.memory.state_dtype)  # a bf16 acting copy keeps its state dtype
         memory.recurrent = next_state * alive.view(-1, *([1] * (next_state.dim() - 1)))
+        cache, matched, generation = self._acting_cache
+        if matched is decision.next_state:  # the same state but for the slots cleared to an episode start
+            self._acting_cache = (cache, memory.recurrent, generation)
         memory.previous_action = torch.where(alive.unsqueeze(-1), decision.actions, -1)
         memory.previous_reward = rewards_t * alive
         memory.episode_step = (memory.episode_step + 1) * alive
@@ -264,6 +276,15 @@ class Actor:
         return digest.hexdigest()
 
     # ------------------------------------------------------------------------------------------------ internals
+    def _cache(self, state: Tensor, episode_step: Tensor) -> Any:
+        """The memory's acting cache of ``state``: the one the last decision advanced, if ``state`` is the one it
+        led to and the weights are unchanged since (:func:`refresh_copy`), else a new one (None: the memory keeps
+        none)."""
+        cache, matched, generation = self._acting_cache
+        if cache is None or matched is not state or generation != self.model.weights_generation:
+            cache = self.model.memory.acting_cache(state, episode_step)
+        return cache
+
     def _empty_memory(self) -> SlotMemory:
         n, k, device = self.num_envs, self.stack, self.device
         return SlotMemory(

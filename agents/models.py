@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -264,6 +265,7 @@ class ActorCritic(nn.Module):
         if reconstruction:
             frame_shape = observation_fields(observation_space, config.grayscale)["image"].shape
             self.decoder = ObservationDecoder(self.memory.output_size, frame_shape)  # type: ignore[arg-type]
+        self.weights_generation = 0  # changes of the weights (agents.actor.refresh_copy): older acting caches are stale
 
     @property
     def state_shape(self) -> tuple[int, ...]:
@@ -302,11 +304,16 @@ class ActorCritic(nn.Module):
         return logits, self.value_head(value).squeeze(-1).float()
 
     def step(
-        self, inputs: dict[str, Tensor], state: Tensor, episode_step: Tensor | None = None
+        self, inputs: dict[str, Tensor], state: Tensor, episode_step: Tensor | None = None, cache: Any = None
     ) -> tuple[list[Tensor], Tensor, Tensor]:
-        """Rollout: one step of B environments (``episode_step`` (B,): decisions since each one's episode start).
-        Returns logits, values (B,) and the next memory state."""
-        output, next_state = self.memory.step(self.encode(inputs), state, episode_step)
+        """Rollout: one step of B environments (``episode_step`` (B,): decisions since each one's episode start;
+        ``cache``: the memory's acting cache of ``state``, :meth:`agents.memory.base.Memory.acting_cache`, which the
+        step advances). Returns logits, values (B,) and the next memory state."""
+        features = self.encode(inputs)
+        if cache is None:  # memories without an acting cache take no such argument
+            output, next_state = self.memory.step(features, state, episode_step)
+        else:
+            output, next_state = self.memory.step(features, state, episode_step, cache)
         logits, values = self.heads(output)
         return logits, values, next_state
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 from torch import Tensor, nn
 
@@ -29,6 +31,15 @@ class Memory(nn.Module):
         """One step of B slots: features (B, F), state (B, *state_shape), decisions since each slot's episode start
         (B,). Returns the output (B, output_size) and the next state."""
         raise NotImplementedError
+
+    def acting_cache(self, state: Tensor, episode_step: Tensor | None = None) -> Any:
+        """What acting may keep from one step to the next instead of recomputing it from the state at every step
+        (a transformer's keys and values of its window), built from ``state`` (B, ...) at ``episode_step`` (B,), or
+        None (the default): nothing. A memory that returns one takes it as :meth:`step`'s ``cache`` and advances it
+        in place, with the outputs and next state of a step without it. The actor keeps it while the memory's
+        parameters are unchanged and every slot steps, or is cleared to an episode start (which must read nothing
+        of it), and builds a new one otherwise."""
+        return None
 
     def record(self, state: Tensor, next_state: Tensor) -> Tensor:
         """What the buffer keeps of one step (B, *record_shape), from the state fed in and the state it gave: by

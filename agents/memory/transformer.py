@@ -27,13 +27,14 @@ CleanRL does, and refuse an episode longer than ``positional_size``; ``none`` ad
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.config import TrxlConfig
-from agents.layers import HIDDEN_GAIN, orthogonal
+from agents.layers import HIDDEN_GAIN, compute_dtype, orthogonal
 from agents.memory.base import Memory
 
 CACHE_DTYPES = {"fp32": torch.float32, "bf16": torch.bfloat16}
@@ -68,6 +69,20 @@ class GRUGate(nn.Module):
         return (1 - z) * x + z * torch.tanh(y_g + self.candidate(r * x))
 
 
+@dataclass
+class KeyValueCache:
+    """What acting reads of the slots' windows, built from their states by :meth:`TransformerXL.acting_cache` and
+    advanced in place by every :meth:`TransformerXL.step`: per block, the keys and values (B, heads, memory_length,
+    head_dim) of the window's entries in a ring whose oldest entry sits at ``oldest`` (the step writes its own over
+    it), and the relative encoding's projected distances (heads, head_dim, memory_length). Valid while the parameters
+    are the ones it was built with; a slot cleared to an episode start needs no rebuild (it reads no entry)."""
+
+    keys: list[Tensor]
+    values: list[Tensor]
+    relative: list[Tensor | None]
+    oldest: int = 0
+
+
 class Block(nn.Module):
     """One sequence-to-one block (see the module docstring)."""
 
@@ -88,41 +103,71 @@ class Block(nn.Module):
         self.feed_forward = nn.Sequential(orthogonal(nn.Linear(dim, dim), HIDDEN_GAIN), nn.ReLU())
         self.gates = nn.ModuleList(GRUGate(dim, config.gating_bias) for _ in range(2)) if config.gating else None
 
-    def _project(self, layer: nn.Linear, x: Tensor) -> Tensor:
-        """(S, T, dim) -> (S, heads, T, head_dim)."""
-        s, t, _ = x.shape
-        if self.shared:
-            return layer(x.view(s, t, self.heads, self.head_dim)).transpose(1, 2)
-        return layer(x).view(s, t, self.heads, self.head_dim).transpose(1, 2)
+    def _project(self, x: Tensor, layers: tuple[nn.Linear, ...]) -> tuple[Tensor, ...]:
+        """(..., dim) through ``layers`` in one matrix product (their weights side by side: ``x`` is read once) ->
+        one (..., heads, head_dim) per layer."""
+        weight = torch.cat([layer.weight for layer in layers]) if len(layers) > 1 else layers[0].weight
+        bias = torch.cat([layer.bias for layer in layers]) if len(layers) > 1 else layers[0].bias
+        if self.shared:  # every head's slice through the same small projections
+            projected = F.linear(x.unflatten(-1, (self.heads, self.head_dim)), weight, bias)
+            return projected.unflatten(-1, (len(layers), self.head_dim)).unbind(-2)
+        return F.linear(x, weight, bias).unflatten(-1, (len(layers), self.heads, self.head_dim)).unbind(-3)
 
-    def attend(self, query: Tensor, memory: Tensor, valid: Tensor, distances: Tensor | None) -> Tensor:
-        """Attention of the queries (S, P, dim) over the cached inputs (S, K, dim) where ``valid`` (S, P, K); a query
-        with no valid key gets exactly zero. ``distances``: (M, dim) sinusoids of the distances 1..M (relative)."""
-        s, p, _ = query.shape
-        q, k, v = self._project(self.query, query), self._project(self.key, memory), self._project(self.value, memory)
+    def keys_values(self, memory: Tensor) -> tuple[Tensor, Tensor]:
+        """Keys and values (..., heads, head_dim) of cached inputs (..., dim)."""
+        keys, values = self._project(self.norms[1](memory) if self.norm == "pre" else memory, (self.key, self.value))
+        return keys, values
+
+    def relative_table(self, distances: Tensor | None) -> Tensor | None:
+        """The relative encoding's projected distances (heads, head_dim, M) from their sinusoids (M, dim) of the
+        distances 1..M, farthest first: column c is the term of a key M - c steps back."""
+        if self.position is None or distances is None:
+            return None
+        table = self.position(distances.to(self.position.weight.dtype)).flip(0)
+        return table.view(-1, self.heads, self.head_dim).permute(1, 2, 0)
+
+    @staticmethod
+    def relative_logits(q: Tensor, table: Tensor, keys: int) -> Tensor:
+        """The relative term (S, heads, P, K) of queries (S, heads, P, head_dim) for K keys of which key kk lies
+        (K - P) + p - kk steps before query p, from the ``table``'s columns (see :meth:`relative_table`). Query p's
+        terms are query 0's shifted by p keys, so one product per query and distance (S, heads, P, M) and a skew
+        (pad each row to K + 1, read the rows K apart) place them, where a gather would need an index per logit;
+        the keys out of reach get other terms, which the mask drops."""
+        by_distance = q @ table  # (S, H, P, M)
+        s, h, p, m = by_distance.shape
+        return F.pad(by_distance, (0, keys + 1 - m)).flatten(-2)[..., : p * keys].view(s, h, p, keys)
+
+    def attend(self, q: Tensor, k: Tensor, v: Tensor, valid: Tensor, table: Tensor | None) -> Tensor:
+        """Attention of the queries (S, heads, P, head_dim) over keys and values (S, heads, K, head_dim) where
+        ``valid`` (S, P, K); a query with no valid key gets exactly zero. ``table``: the relative encoding's
+        (:meth:`relative_logits`)."""
         logits = q @ k.transpose(-1, -2)  # (S, H, P, K)
-        if self.position is not None and distances is not None:
-            m = distances.shape[0]
-            r = self.position(distances.to(q.dtype)).view(m, self.heads, self.head_dim)
-            by_distance = torch.einsum("shpd,mhd->shpm", q, r)  # (S, H, P, M): the term of distance m + 1
-            k_len = memory.shape[1]
-            # key kk of query p sits at distance (k_len - p_len) + p - kk, i.e. index that - 1 in by_distance
-            offset = k_len - p
-            index = offset + torch.arange(p, device=q.device)[:, None] - torch.arange(k_len, device=q.device) - 1
-            index = index.clamp(0, m - 1).expand(s, self.heads, p, k_len)
-            logits = logits + by_distance.gather(-1, index)
+        if table is not None:
+            logits = logits + self.relative_logits(q, table, k.shape[-2])
         logits = logits.float() * (1.0 / math.sqrt(self.head_dim))
         mask = valid.unsqueeze(1)
         logits = logits.masked_fill(~mask, torch.finfo(logits.dtype).min)
         weights = torch.softmax(logits, dim=-1) * mask  # an empty window: all zeros, not uniform over padding
-        attended = (weights.to(v.dtype) @ v).transpose(1, 2).reshape(s, p, -1)
-        return self.out(attended)
+        return weights.to(v.dtype) @ v
 
-    def forward(self, h: Tensor, memory: Tensor, valid: Tensor, distances: Tensor | None) -> Tensor:
+    def forward(
+        self,
+        h: Tensor,
+        keys_values: tuple[Tensor, Tensor],
+        valid: Tensor,
+        rows: Tensor | None,
+        table: Tensor | None,
+    ) -> Tensor:
+        """The block on the queries' inputs ``h`` (N, dim), the real steps of S sequences of P positions (``rows``:
+        their flat positions in S * P, None when every position is one, P = 1), attending over ``keys_values``."""
+        s, p = valid.shape[:2]
         pre, post = self.norm == "pre", self.norm == "post"
-        query = self.norms[0](h) if pre else h
-        keys = self.norms[1](memory) if pre else memory
-        attended = self.attend(query, keys, valid, distances)
+        (q,) = self._project(self.norms[0](h) if pre else h, (self.query,))  # (N, H, hd)
+        if rows is not None:  # the sequences' padded layout, only for the attention itself
+            q = q.new_zeros((s * p, *q.shape[1:])).index_copy(0, rows, q)
+        attended = self.attend(q.view(s, p, *q.shape[1:]).transpose(1, 2), *keys_values, valid, table)
+        attended = attended.transpose(1, 2).reshape(s * p, -1)
+        attended = self.out(attended if rows is None else attended.index_select(0, rows))
         h = self.gates[0](h, F.relu(attended)) if self.gates is not None else h + attended
         if post:
             h = self.norms[0](h)
@@ -155,7 +200,34 @@ class TransformerXL(Memory):
         elif self.encoding == "learned":
             self.positions = nn.Parameter(torch.randn(config.positional_size, dim) * 0.02)
 
-    def step(self, features: Tensor, state: Tensor, episode_step: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    def _positions(self, key_step: Tensor, dtype: torch.dtype) -> Tensor | None:
+        """The absolute/learned encoding of keys at episode steps ``key_step`` (None for the other encodings)."""
+        if self.encoding not in ("absolute", "learned"):
+            return None
+        return self.positions[key_step.clamp(0, self.config.positional_size - 1)].to(dtype)
+
+    def acting_cache(self, state: Tensor, episode_step: Tensor | None = None) -> KeyValueCache:
+        """The keys and values of the windows ``state`` (B, memory_length, layers, dim) at ``episode_step`` (B,)
+        (see :class:`KeyValueCache`): one projection of each window, where a step without it projects one entry."""
+        if episode_step is None:
+            raise ValueError("the trxl memory needs each slot's episode_step (decisions since its episode start)")
+        dtype = compute_dtype(self.embed[0].weight)
+        length = state.shape[1]
+        key_step = episode_step.unsqueeze(1) - length + torch.arange(length, device=state.device)
+        position = self._positions(key_step, dtype)
+        keys, values = [], []
+        for layer, block in enumerate(self.blocks):
+            memory = state[:, :, layer].to(dtype)
+            k, v = block.keys_values(memory if position is None else memory + position)  # (B, M, H, hd)
+            keys.append(k.transpose(1, 2).contiguous())
+            values.append(v.transpose(1, 2).contiguous())
+        return KeyValueCache(keys, values, [block.relative_table(self.distances) for block in self.blocks])
+
+    def step(
+        self, features: Tensor, state: Tensor, episode_step: Tensor | None = None, cache: KeyValueCache | None = None
+    ) -> tuple[Tensor, Tensor]:
+        """One step; ``cache`` (advanced in place) is :meth:`acting_cache` of an earlier state advanced by every
+        step since, None: built from ``state`` here (the same outputs, up to the rounding of the projections)."""
         if episode_step is None:
             raise ValueError("the trxl memory needs each slot's episode_step (decisions since its episode start)")
         if self.encoding in ("absolute", "learned"):
@@ -166,11 +238,27 @@ class TransformerXL(Memory):
                     f"{self.config.positional_size} episode steps, and an episode reached step {longest}: use "
                     "'relative' (valid for any episode length) or a larger positional_size"
                 )
-        placeholder = state.new_zeros((state.shape[0], 1, *self.record_shape))  # the step itself: never attended
-        records = torch.cat((state, placeholder), dim=1)
-        output, inputs = self._run(features.unsqueeze(1), records, episode_step.unsqueeze(1))
-        next_state = torch.cat((state[:, 1:], inputs.to(state.dtype)), dim=1)
-        return output.squeeze(1), next_state
+        if cache is None:
+            cache = self.acting_cache(state, episode_step)
+        length = state.shape[1]
+        h = self.embed(features)
+        age = (torch.arange(length, device=h.device) - cache.oldest) % length  # ring entry -> 0 for the oldest
+        distance = length - age  # steps back from this one: 1..M
+        valid = (distance <= episode_step.clamp(max=length).unsqueeze(1)).unsqueeze(1)  # (B, 1, M)
+        position = self._positions(episode_step, h.dtype)  # of the step's own entry
+        inputs = []
+        for layer, block in enumerate(self.blocks):
+            inputs.append(h)
+            entry = h.to(self.state_dtype).to(h.dtype)  # as the state keeps it, so the training pass reads the same
+            new_key, new_value = block.keys_values(entry if position is None else entry + position)
+            table = cache.relative[layer]  # its columns follow the ring: the oldest entry's is the farthest's
+            table = None if table is None else table.roll(cache.oldest, dims=-1)
+            h = block(h, (cache.keys[layer], cache.values[layer]), valid, None, table)
+            cache.keys[layer][:, :, cache.oldest] = new_key  # after the attention: a step never attends to itself
+            cache.values[layer][:, :, cache.oldest] = new_value
+        cache.oldest = (cache.oldest + 1) % length
+        next_state = torch.cat((state[:, 1:], torch.stack(inputs, dim=1).unsqueeze(1).to(state.dtype)), dim=1)
+        return h, next_state
 
     def record(self, state: Tensor, next_state: Tensor) -> Tensor:
         return next_state[:, -1]  # the step's own layer inputs, the newest entry of its window
@@ -179,35 +267,28 @@ class TransformerXL(Memory):
         return state
 
     def sequences(self, features: Tensor, records: Tensor, mask: Tensor, episode_step: Tensor | None = None) -> Tensor:
+        """Queries of the real steps only; keys and values projected only for the records some query reads (a
+        sequence starting an episode reads none of the window before it, and the padding reads nothing)."""
         if episode_step is None:
             raise ValueError("the trxl memory needs each step's episode_step (decisions since its episode start)")
         s, p = mask.shape
-        padded = features.new_zeros((s, p, features.shape[-1])).index_put((mask,), features)
-        steps = episode_step.new_zeros((s, p)).index_put((mask,), episode_step)
-        output, _ = self._run(padded, records, steps)
-        return output[mask]
-
-    def _run(self, features: Tensor, records: Tensor, episode_step: Tensor) -> tuple[Tensor, Tensor]:
-        """Queries (S, P, F) at positions M..M+P-1 of the cached inputs ``records`` (S, M + P, layers, dim), their
-        episode steps (S, P). Returns the outputs (S, P, dim) and the layer inputs the queries computed
-        (S, P, layers, dim)."""
-        p, k_len = features.shape[1], records.shape[1]
-        length = self.config.memory_length
-        distance = (
-            (k_len - p) + torch.arange(p, device=features.device)[:, None] - torch.arange(k_len, device=features.device)
-        )  # (P, K): how many steps key kk lies before query p
-        reach = episode_step.clamp(max=length).unsqueeze(-1)  # the window holds this many steps of the episode
+        length, k_len, device = self.config.memory_length, records.shape[1], features.device
+        rows = mask.flatten().nonzero().squeeze(1)  # flat positions of the real steps in (S, P)
+        steps = episode_step.new_zeros(s * p).index_copy(0, rows, episode_step).view(s, p)
+        distance = (k_len - p) + torch.arange(p, device=device)[:, None] - torch.arange(k_len, device=device)
+        reach = steps.clamp(max=length).unsqueeze(-1)  # the window holds this many steps of the episode (padding: 0)
         valid = (distance >= 1) & (distance <= reach)  # (S, P, K): earlier steps of the episode, within the window
+        needed = valid.any(dim=1).flatten().nonzero().squeeze(1)  # flat (S * K) keys some query reads
         h = self.embed(features)
-        position = None
-        if self.encoding in ("absolute", "learned"):  # the episode step of every key, from the first query's
-            key_step = episode_step[:, :1] - (k_len - p) + torch.arange(k_len, device=features.device)
-            position = self.positions[key_step.clamp(0, self.config.positional_size - 1)]  # (S, K, dim)
-        inputs = []
+        dtype = h.dtype
+        read = records.flatten(0, 1).index_select(0, needed)  # (keys, layers, dim)
+        key_step = steps[:, :1] - (k_len - p) + torch.arange(k_len, device=device)  # from the first query's step
+        position = self._positions(key_step.flatten().index_select(0, needed), dtype)
         for layer, block in enumerate(self.blocks):
-            inputs.append(h)
-            memory = records[:, :, layer].to(h.dtype)
-            if position is not None:
-                memory = memory + position.to(h.dtype)
-            h = block(h, memory, valid, self.distances)
-        return h, torch.stack(inputs, dim=2)
+            memory = read[:, layer].to(dtype)
+            keys_values = []
+            for projected in block.keys_values(memory if position is None else memory + position):
+                padded = projected.new_zeros((s * k_len, *projected.shape[1:])).index_copy(0, needed, projected)
+                keys_values.append(padded.view(s, k_len, *projected.shape[1:]).transpose(1, 2))
+            h = block(h, tuple(keys_values), valid, rows, block.relative_table(self.distances))
+        return h

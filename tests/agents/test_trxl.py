@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 import torch
 
+from agents.actor import refresh_copy
 from agents.buffer import RolloutBuffer
 from agents.config import ConfigError, TrxlConfig, config_from_dict
 from agents.memory import TransformerXL
 from agents.sequences import pad_sequences, split_sequences
+from agents.trainer import Trainer
 
 FEATURES = 5
 
@@ -43,9 +45,12 @@ def _rollout(
     terminated: np.ndarray,
     episode_step: torch.Tensor,
     window_seed: int = 1,
+    cached: bool = True,
 ) -> tuple[torch.Tensor, RolloutBuffer]:
-    """Act step by step from a random carried-in window (drawn with ``window_seed``) as the actor does; returns the
-    outputs (W, T, dim) and the buffer holding the records and episode steps."""
+    """Act step by step from a random carried-in window (drawn with ``window_seed``) as the actor does: with
+    ``cached``, one acting cache built from that window and carried through every step and episode end, else one
+    built afresh from the state at every step. Returns the outputs (W, T, dim) and the buffer holding the records
+    and episode steps."""
     workers, steps = terminated.shape
     state = torch.randn((workers, *memory.state_shape), generator=torch.Generator().manual_seed(window_seed))
     state = state.to(memory.state_dtype)
@@ -53,8 +58,9 @@ def _rollout(
     buffer.begin({}, memory.history_records(state))
     outputs = []
     with torch.no_grad():
+        cache = memory.acting_cache(state, episode_step) if cached else None
         for t in range(steps):
-            output, next_state = memory.step(features[:, t], state, episode_step)
+            output, next_state = memory.step(features[:, t], state, episode_step, cache)
             buffer.store_record(t, memory.record(state, next_state))
             buffer.episode_step[:, t] = episode_step
             outputs.append(output)
@@ -94,6 +100,61 @@ def test_cached_rollout_outputs_equal_the_training_pass(variant: dict) -> None:
         with torch.no_grad():
             trained = _training_pass(memory, buffer, features, batch)
         torch.testing.assert_close(trained, outputs.reshape(33, -1)[batch.step_index], atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: "-".join(str(x) for x in v.values()))
+def test_a_carried_acting_cache_gives_the_outputs_of_one_built_at_every_step(variant: dict) -> None:
+    """The keys and values projected once per entry and carried in a ring through episode ends (where the cleared
+    slot reads none of them) give what projecting the whole window at every step gives, up to rounding."""
+    memory = _memory(**variant)
+    terminated, episode_step = _layout()
+    features = torch.randn(3, 11, FEATURES, generator=torch.Generator().manual_seed(8))
+    carried, carried_buffer = _rollout(memory, features, terminated, episode_step)
+    fresh, fresh_buffer = _rollout(memory, features, terminated, episode_step, cached=False)
+    torch.testing.assert_close(carried, fresh, atol=1e-6, rtol=1e-6)
+    torch.testing.assert_close(carried_buffer.memory_states, fresh_buffer.memory_states, atol=1e-6, rtol=1e-6)
+
+
+def test_the_actor_rebuilds_its_acting_cache_when_the_weights_or_the_state_change(tmp_path) -> None:
+    """Every decision of the trainer's actor (caches carried through rollouts, rebuilt after each update's new
+    weights, episode ends inside) is what a step that builds its cache from the state gives."""
+    config = config_from_dict(
+        {
+            "env": {"id": "ProofOfMemory-v0", "options": {"delay": 4}},
+            "model": {"memory": "trxl", "hidden_size": 16, "trxl": {"layers": 2, "heads": 2, "dim": 16}},
+            "ppo": {"epochs": 1, "minibatches": 2},
+            "run": {"total_steps": 4 * 8 * 3, "workers": 4, "worker_steps": 8, "seed": 3, "progress_bar": False},
+        },
+        ["model.trxl.memory_length=3", "run.torch_threads=1"],
+    )
+    trainer = Trainer(config, tmp_path)
+    model = trainer.rollout_model
+    acting_step, checked = model.step, []
+
+    def compared_step(inputs, state, episode_step, cache=None):
+        fresh = acting_step(inputs, state, episode_step)  # first: the cached step advances its cache
+        result = acting_step(inputs, state, episode_step, cache)
+        for a, b in zip((*fresh[0], *fresh[1:]), (*result[0], *result[1:]), strict=True):
+            torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
+        checked.append(cache is not None)
+        return result
+
+    model.step = compared_step  # type: ignore[method-assign]
+    for _ in range(3):
+        trainer.train_update()
+    assert sum(checked) == 3 * 8  # every decision of the rollouts used a cache
+    actor = trainer.actor
+    for _ in range(2):  # a cache of the current weights advanced to the current state, windows not empty
+        actor.advance(actor.decide())
+    assert actor.memory.episode_step.min() > 0
+    actor.memory.recurrent = torch.randn_like(actor.memory.recurrent)  # a replaced state (as a resume loads one)
+    actor.advance(actor.decide())
+    with torch.no_grad():
+        for weight in model.memory.parameters():
+            weight.mul_(0.5)  # new weights (as an update writes them): stale keys and values would show
+    refresh_copy(model, trainer.model)
+    actor.decide()
+    assert sum(checked) == 3 * 8 + 4
 
 
 def test_a_bf16_cache_gives_the_same_outputs_in_rollout_and_training() -> None:
@@ -137,12 +198,12 @@ def test_no_attention_across_episodes_to_itself_or_the_future() -> None:
 
 def test_the_empty_window_gives_zero_attention_not_a_softmax_over_padding() -> None:
     block = _memory().blocks[0]
-    query, keys = torch.randn(2, 1, 8), torch.randn(2, 4, 8)
+    query, keys, values = torch.randn(2, 2, 1, 4), torch.randn(2, 2, 4, 4), torch.randn(2, 2, 4, 4)
     valid = torch.zeros(2, 1, 4, dtype=torch.bool)
     valid[1, 0, 2] = True
-    attended = block.attend(query, keys, valid, None)
-    torch.testing.assert_close(attended[0], block.out.bias.expand(1, 8))  # no value reaches it, only the out bias
-    assert not torch.allclose(attended[1], attended[0])
+    attended = block.attend(query, keys, values, valid, None)
+    torch.testing.assert_close(attended[0], torch.zeros(2, 1, 4), atol=0, rtol=0)  # no value reaches it
+    torch.testing.assert_close(attended[1], values[1, :, 2:3])  # the one valid key gets all the weight
 
 
 def test_padding_changes_no_output_and_no_gradient() -> None:
