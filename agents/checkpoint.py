@@ -141,6 +141,15 @@ def checked_payload(path: str | Path) -> bytes:
     return payload
 
 
+def checkpoint_damage(path: str | Path) -> str | None:
+    """Why the checkpoint at ``path`` is damaged (:func:`checked_payload`'s message), or None when it is whole."""
+    try:
+        checked_payload(path)
+    except DamagedCheckpoint as err:
+        return str(err)
+    return None
+
+
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
     """The state saved in a checkpoint, checked first (:func:`checked_payload`): a damaged file is never loaded."""
     payload = checked_payload(path)

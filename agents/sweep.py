@@ -51,7 +51,14 @@ from typing import Any
 
 import yaml
 
-from agents.checkpoint import checkpoint_update, finished_update, latest_checkpoint, run_config
+from agents.checkpoint import (
+    DamagedCheckpoint,
+    checkpoint_damage,
+    checkpoint_update,
+    finished_update,
+    latest_checkpoint,
+    run_config,
+)
 from agents.config import (
     GRID_SETTINGS,
     NAMED_AXES,
@@ -463,9 +470,12 @@ def train_run(run_dir: str | Path, echo: Echo = print) -> str:
         config = run_config(run_dir)
         latest = latest_checkpoint(run_dir)
         done = checkpoint_update(latest) if latest is not None else 0
-        if done >= config.num_updates:
+        damage = checkpoint_damage(latest) if latest is not None and done >= config.num_updates else None
+        if done >= config.num_updates and damage is None:
             echo(f"{run_dir}: finished already ({done} of {config.num_updates} updates)")
             return FINISHED
+        if damage is not None:
+            echo(f"warning: {damage}; the run resumes from an intact checkpoint")
         if latest is None:
             _clear_first_attempt(run_dir)
             echo(f"{now()} {run_dir}: training {config.num_updates} updates from scratch")
@@ -971,7 +981,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Preempted as err:
         print(f"pre-empted: {err}", flush=True)
         return EXIT_PREEMPTED
-    except (TrainingDiverged, WriteFailed) as err:
+    except (TrainingDiverged, WriteFailed, DamagedCheckpoint) as err:
         print(f"error: {err}", flush=True)
         return 1
     return EXIT_BUSY if result == "busy" else 0

@@ -24,7 +24,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
-from agents.checkpoint import checkpoint_update, latest_checkpoint, run_config  # noqa: E402
+from agents.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
 from agents.config import ConfigError, load_config, rounding_notice  # noqa: E402
 from agents.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
 from agents.trainer import Trainer, TrainingDiverged, WriteFailed, default_run_dir  # noqa: E402
@@ -89,8 +89,8 @@ def _finished(run_dir: Path) -> str | None:
     """What to say when the run in ``run_dir`` has done all its updates (None when it has not): read from the
     config and the newest checkpoint's name, before anything is built or written."""
     config, latest = run_config(run_dir), latest_checkpoint(run_dir)
-    if latest is None or checkpoint_update(latest) < config.num_updates:
-        return None
+    if latest is None or checkpoint_update(latest) < config.num_updates or checkpoint_damage(latest):
+        return None  # a damaged last checkpoint: Trainer.resume falls back to an intact one (or names the damage)
     steps, total = checkpoint_update(latest) * config.batch_size, config.num_updates * config.batch_size
     return (
         f"{run_dir}: already finished ({steps} steps of {total}); nothing changed. "

@@ -160,6 +160,21 @@ def test_resume_falls_back_to_the_newest_intact_checkpoint_and_says_so(tmp_path:
     _assert_same_run(uninterrupted, run_dir)
 
 
+def test_a_finished_run_whose_last_checkpoint_is_damaged_is_not_taken_as_finished(
+    tmp_path: Path, uninterrupted: Path, capsys: pytest.CaptureFixture
+) -> None:
+    run_dir = tmp_path / "run"
+    shutil.copytree(uninterrupted, run_dir)
+    last = run_dir / "checkpoints" / "update_0000006.pt"
+    last.write_bytes(last.read_bytes()[:1000])
+    assert train_script.main(["--resume", str(run_dir)]) == 0
+    error = capsys.readouterr().err
+    assert (
+        "warning: " in error and "update_0000006.pt is damaged" in error and "resuming from update_0000004.pt" in error
+    )
+    _assert_same_run(uninterrupted, run_dir)
+
+
 def test_resume_refuses_when_no_checkpoint_is_intact(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     run_dir = tmp_path / "run"
     _killed_after(_config(), run_dir, 5)
