@@ -194,7 +194,7 @@ def check_checkpoint_config(state: dict[str, Any], config: Config, path: str | P
     """That the checkpoint at ``path`` was written by ``config`` (the run's ``config.yaml``). One difference is
     allowed: ``run.total_steps`` raised since, i.e. the run was extended after this checkpoint (``train.py --resume
     DIR --set run.total_steps=N``). Returns the checkpoint's number of updates in that case, else None."""
-    saved, current = state["config"], config_to_dict(config)
+    saved, current = _with_new_defaults(state["config"]), config_to_dict(config)
     if saved == current:
         return None
     saved_steps = saved.get("run", {}).get("total_steps")
@@ -210,6 +210,15 @@ def check_checkpoint_config(state: dict[str, Any], config: Config, path: str | P
             "extended, not shortened"
         )
     return saved_updates if saved_updates < config.num_updates else None
+
+
+def _with_new_defaults(saved: dict[str, Any]) -> dict[str, Any]:
+    """A checkpoint's config with the fields added to the config since it was written, at their defaults (which keep
+    the old behaviour), as ``config.yaml`` is read; as saved if the current code cannot read it."""
+    try:
+        return config_to_dict(config_from_dict(saved))
+    except ValueError:
+        return saved
 
 
 def _differing_keys(a: Any, b: Any, prefix: str = "") -> list[str]:

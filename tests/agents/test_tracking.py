@@ -13,7 +13,8 @@ from typing import Any
 import pytest
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from agents.config import ConfigError, config_from_dict
+from agents.checkpoint import check_checkpoint_config
+from agents.config import ConfigError, config_from_dict, config_to_dict
 from agents.io import git_revision
 from agents.trainer import Trainer
 
@@ -141,3 +142,15 @@ def test_wandb_offline_mode_writes_one_local_run_that_a_resume_continues(
     offline = sorted(path.name for path in (run_dir / "wandb").glob("offline-run-*"))
     assert len(offline) == 2 and all(name.endswith(f"-{run_id}") for name in offline)
     assert all(any(path.glob(f"run-{run_id}.wandb")) for path in (run_dir / "wandb").glob("offline-run-*"))
+
+
+def test_checkpoints_written_before_a_config_field_existed_still_load() -> None:
+    """run.wandb was added after runs were checkpointed: their saved configs lack it, and the default keeps them
+    the same config (the committed results/popgym runs were trained before it existed)."""
+    config = config_from_dict(TINY)
+    saved = config_to_dict(config)
+    del saved["run"]["wandb"]
+    assert check_checkpoint_config({"config": saved}, config, "update_0000001.pt") is None
+    saved["run"]["seed"] = 99  # a real difference is still one
+    with pytest.raises(ValueError, match=r"different config than the run's config.yaml \(differing: run.seed\)"):
+        check_checkpoint_config({"config": saved}, config, "update_0000001.pt")
