@@ -33,7 +33,8 @@ from agents.io import (
     provenance,
     write_json_atomic,
 )
-from agents.metrics import metric_of
+from agents.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
+from agents.faults import active_faults
 from agents.models import ActorCritic
 from agents.preemption import deferred_signals
 from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS, config_digest, env_options_text, read_episodes
@@ -87,6 +88,7 @@ def evaluate(
     if bar is not None:
         bar.close()
     metric = metric_of(config.env.id, config.env.metric)
+    spec = {} if METRICS.get(config.env.id) is metric else {SPEC_COLUMN: metric_spec(metric)}  # plots read it
     options, digest = env_options_text(config), config_digest(config, greedy)  # the columns agents.results checks
     records = []
     for slot in range(slots):
@@ -107,6 +109,7 @@ def evaluate(
                 "metric_reference": float(metric.reference(info)),
                 "env_options": options,
                 "config_digest": digest,
+                **spec,
                 **{key: value for key, value in extra.items() if _is_number(value)},
             }
         )
@@ -410,6 +413,7 @@ def evaluate_runs(
     Every file is written atomically, after the merged records were checked. ``echo`` receives what is evaluated
     (the inclusive seed range, checkpoints) and what the merge kept and replaced."""
     say = echo or (lambda message: None)
+    active_faults()  # a malformed MEMGYM_FAULT is refused before any work (FaultSpecError, a ValueError)
     if repetitions is not None and repetitions < 1:
         raise ValueError(f"repetitions={repetitions} is invalid: expected a whole number >= 1")
     if video is not None and videos < 1:

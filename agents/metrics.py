@@ -15,6 +15,7 @@ defaults resolved); it is None where it is unknown, e.g. when the options are no
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -122,3 +123,19 @@ def _info_entry(name: str, env_id: str) -> Callable[[Info], float]:
         return float(info[name])
 
     return value
+
+
+SPEC_COLUMN = "metric_spec"  # the records' column that describes a metric the table does not hold
+
+
+def metric_spec(metric: Metric) -> str:
+    """``metric``'s name, label and range as compact JSON: what the records of a task whose metric is not in
+    :data:`METRICS` (a gymnasium environment's return, a config's ``env.metric``) carry in :data:`SPEC_COLUMN`, so
+    that plots label and scale it as the run defined it."""
+    fields = {"name": metric.name, "label": metric.label, "low": metric.low, "high": metric.high}
+    return json.dumps(fields, separators=(",", ":"))
+
+
+def read_metric_spec(text: str) -> dict[str, Any] | None:
+    """The fields of :func:`metric_spec` (None for an empty cell: the table's metric)."""
+    return json.loads(text) if text else None

@@ -26,7 +26,7 @@ import numpy as np
 
 from agents import results
 from agents.io import atomic_write_bytes
-from agents.metrics import METRICS, metric_of
+from agents.metrics import METRICS, SPEC_COLUMN, metric_of, read_metric_spec
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -135,9 +135,14 @@ def task_title(env_id: str, options: Mapping[str, Any] | None, task: str = "") -
     return ", ".join([env_id, *shown])
 
 
-def metric_range(env_id: str, column: str = "metric") -> tuple[float | None, float | None]:
+def metric_range(
+    env_id: str, column: str = "metric", spec: Mapping[str, Any] | None = None
+) -> tuple[float | None, float | None]:
     """The (low, high) range of a column of the paper's metric (``metric``, ``metric_reference``) from the metric
-    table; (None, None) for other columns and ids without a metric."""
+    table, or from ``spec`` (the records' ``metric_spec``: a metric the table does not hold); (None, None) for other
+    columns and ids without a metric."""
+    if column == "metric" and spec:
+        return spec["low"], spec["high"]
     if column in ("metric", "metric_reference") and env_id in METRICS:
         return METRICS[env_id].low, METRICS[env_id].high
     return None, None
@@ -168,8 +173,11 @@ def _complete(colors: dict[str, str] | None, methods: Iterable[str]) -> dict[str
     return {**colors, **{method: color for method, color in defaults.items() if method not in colors}}
 
 
-def metric_label(env_id: str, column: str = "metric") -> str:
-    """The axis label of a task's metric (from :data:`agents.metrics.METRICS`); the column name for other columns."""
+def metric_label(env_id: str, column: str = "metric", spec: Mapping[str, Any] | None = None) -> str:
+    """The axis label of a task's metric (from :data:`agents.metrics.METRICS`, or ``spec`` as in :func:`metric_range`);
+    the column name for other columns."""
+    if column == "metric" and spec:
+        return spec["label"]
     if column == "metric" and env_id in METRICS:
         return METRICS[env_id].label
     if column == "metric_reference" and env_id in METRICS:
@@ -195,6 +203,18 @@ def _env_ids(*tables: results.Records | None) -> dict[str, str]:
     return found
 
 
+def _metric_specs(*tables: results.Records | None) -> dict[str, dict[str, Any]]:
+    """task -> the ``metric_spec`` its records carry (tasks whose metric is in the table have none)."""
+    found: dict[str, dict[str, Any]] = {}
+    for table in tables:
+        if table is not None and SPEC_COLUMN in table:
+            for task, text in zip(table["task"].tolist(), table[SPEC_COLUMN].tolist(), strict=True):
+                spec = read_metric_spec(text)
+                if spec is not None:
+                    found[task] = spec
+    return found
+
+
 def _titles(env_ids: Mapping[str, str], options: Mapping[str, Any]) -> dict[str, str]:
     """task -> title; tasks whose titles would coincide (the same options under two names) add their name."""
     titles = {task: task_title(env_id, options.get(task), task) for task, env_id in env_ids.items()}
@@ -216,14 +236,16 @@ def _fix_range(axes: Axes, low: float | None, high: float | None, axis: str = "y
     set_(bottom - pad if low is not None else bottom, top + pad if high is not None else top)
 
 
-def _decorate(axes: Axes, env_id: str, options: Any, column: str, zoom: bool, title: str) -> bool:
+def _decorate(
+    axes: Axes, env_id: str, options: Any, column: str, zoom: bool, title: str, spec: Mapping[str, Any] | None = None
+) -> bool:
     """Title, y label, the metric's range (unless ``zoom``) and the chance line of one curves panel; whether the
     chance line was drawn."""
     drawn = _draw_chance(axes, chance_level(env_id, options, column))
     if not zoom:
-        _fix_range(axes, *metric_range(env_id, column))
+        _fix_range(axes, *metric_range(env_id, column, spec))
     axes.set_title(title, fontsize=10)
-    axes.set_ylabel(metric_label(env_id, column))
+    axes.set_ylabel(metric_label(env_id, column, spec))
     return drawn
 
 
@@ -273,6 +295,7 @@ def curves_figure(
     ``options``: task -> non-default env options (default: :func:`agents.results.task_options` of the records).
     The legend lists the methods drawn; methods drawn in no panel are named in a :class:`ResultsWarning`."""
     env_ids = _env_ids(episodes, training)
+    specs = _metric_specs(episodes)
     tasks = sorted(env_ids)
     options = results.task_options(episodes) if options is None else options
     titles = _titles(env_ids, options)
@@ -294,7 +317,8 @@ def curves_figure(
             else []
         )
         drawn |= _draw_curves(novel, rows, colors)
-        chance_drawn |= _decorate(novel, env_id, options.get(task), column, zoom, f"{title}: novel seeds")
+        novel_title = f"{title}: novel seeds"
+        chance_drawn |= _decorate(novel, env_id, options.get(task), column, zoom, novel_title, specs.get(task))
         if training is not None:
             left = panels[row, 0]
             curves = results.training_curves(training.where(task=task), column=training_column, points=points)
@@ -351,6 +375,7 @@ def final_figure(
     run's last checkpoint. A metric's axis spans its whole range unless ``zoom`` (then it is fitted to the
     intervals); a dashed line marks the chance level where known (``options`` as in :func:`curves_figure`)."""
     env_ids = _env_ids(episodes)
+    specs = _metric_specs(episodes)
     tasks = sorted(env_ids)
     options = results.task_options(episodes) if options is None else options
     titles = _titles(env_ids, options)
@@ -385,10 +410,10 @@ def final_figure(
             pad = 0.08 * ((high - low) or max(abs(high), 1.0))
             axes.set_xlim(low - pad, high + pad)
         if not zoom:
-            _fix_range(axes, *metric_range(env_id, column), axis="x")
+            _fix_range(axes, *metric_range(env_id, column, specs.get(task)), axis="x")
         axes.set_ylim(-0.6, len(methods) - 0.4)
         axes.invert_yaxis()
-        axes.set_xlabel(metric_label(env_id, column))
+        axes.set_xlabel(metric_label(env_id, column, specs.get(task)))
         steps = sorted({row["step"] for row in mine.values()})
         at = f"{steps[0] / 1e6:.3g}M steps" if len(steps) == 1 else "each run's last checkpoint"
         axes.set_title(textwrap.fill(f"{titles[task]} ({at})", FINAL_TITLE_WIDTH), fontsize=10)

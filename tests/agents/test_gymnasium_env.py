@@ -13,9 +13,11 @@ import torch
 
 import envs
 from agents.config import ConfigError, config_from_dict, task_name
-from agents.evaluation import evaluate, seed_list
+from agents.evaluation import evaluate, seed_list, write_records
 from agents.memory import MEMORY_MODULES
 from agents.metrics import metric_of
+from agents.plots import curves_figure, final_figure
+from agents.results import read_episodes
 from agents.trainer import Trainer
 from envs.gymnasium_core import GymnasiumCore, SeedingError, UnsupportedSpaceError
 from tests.support.tiny_env import ENV_ID, TinyMemoryEnv
@@ -218,6 +220,21 @@ def test_gru_ppo_learns_the_tiny_env_and_is_evaluated_on_novel_seeds(tmp_path: P
     memoryless = Trainer(_config(*SUCCESS, "run.total_steps=8192", "model.memory=none"), tmp_path / "ppo")
     memoryless.train()
     assert 0.3 < np.mean([r["metric"] for r in _novel_seed_success(memoryless)]) < 0.7
+
+
+def test_plots_label_and_scale_the_configured_metric(tmp_path: Path) -> None:
+    """The records carry env.metric's label and range (metric_spec), which the figures use; a gymnasium id without
+    env.metric is labelled by its return."""
+    for overrides, label, scaled in ((SUCCESS, "Success Rate", True), ((), "Return", False)):
+        trainer = Trainer(_config(*overrides, "run.total_steps=512"), tmp_path / "run")
+        records = evaluate(trainer.model, None, trainer.config, [100000, 100001], 2, run="seed1")
+        write_records(tmp_path / label / "episodes.csv", records)
+        episodes = read_episodes(tmp_path / label)
+        axes = final_figure(episodes, reps=50).axes[0]
+        assert axes.get_xlabel() == label
+        low, high = axes.get_xlim()
+        assert (low < 0.0 and high > 1.0) == scaled  # the whole range [0, 1], padded; else fitted to the intervals
+        assert curves_figure(episodes, reps=50).axes[0].get_ylabel() == label
 
 
 @pytest.mark.parametrize(
