@@ -25,6 +25,7 @@ import torch
 from agents.actor import Actor, Outcome
 from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
 from agents.config import Config, check_disjoint_seeds, is_device_name
+from agents.faults import active_faults
 from agents.io import (
     atomic_write_bytes,
     atomic_write_text,
@@ -34,7 +35,6 @@ from agents.io import (
     write_json_atomic,
 )
 from agents.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
-from agents.faults import active_faults
 from agents.models import ActorCritic
 from agents.preemption import deferred_signals
 from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS, config_digest, env_options_text, read_episodes

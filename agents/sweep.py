@@ -75,6 +75,7 @@ from agents.config import (
     grid_slurm,
     read_config_file,
 )
+from agents.faults import FaultSpecError, active_faults
 from agents.io import atomic_write_text, create_text_once, now, provenance, write_json_atomic
 from agents.preemption import EXIT_PREEMPTED, StopRequests, signal_name
 
@@ -551,6 +552,10 @@ def launch_local(
     are stopped and resume on the next call. Pre-empted (SIGTERM or SLURM's warning signal, :mod:`agents.preemption`),
     it passes the signal on to the running runs, which checkpoint and exit (outcome ``preempted``), and starts no
     other."""
+    try:
+        active_faults()  # the workers inherit MEMGYM_FAULT: a malformed one is refused once, here
+    except FaultSpecError as err:
+        raise SweepError(str(err)) from None
     pending = [s for s in statuses(runs) if s.state in (NEW, PARTIAL)]
     if not pending:
         return []

@@ -93,6 +93,7 @@ class Trainer:
         self.config = config
         self.run_dir = Path(run_dir)
         self.device = check_device(config.run.device, "run.device")
+        faults.active_faults()  # a malformed MEMGYM_FAULT is refused here, before any work (FaultSpecError)
         torch.set_num_threads(config.run.torch_threads or os.cpu_count() or 1)
         if self.device.type == "cpu":
             keep_freed_memory()

@@ -102,6 +102,17 @@ def test_a_bad_fault_spec_names_the_part_and_the_choices(spec: str, message: str
     assert message in str(caught.value)
 
 
+def test_a_bad_fault_spec_stops_the_scripts_before_any_work(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    config_path = tmp_path / "tiny.yaml"
+    config_path.write_text(yaml.safe_dump(TINY))
+    monkeypatch.setenv(faults.ENV_VARIABLE, "write:*.pt:1:fsync:explode")
+    assert train_script.main(["--config", str(config_path), "--run-dir", str(tmp_path / "run")]) == 2
+    assert "error: MEMGYM_FAULT: 'write:*.pt:1:fsync:explode': action 'explode' is invalid" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
 def test_fault_specs_parse() -> None:
     found = parse_faults(" write:update_*.pt:2:fsync:eio ; update:3:params:inf;signal:4:SIGUSR2 ")
     assert [(f.site, f.count, f.pattern, f.stage, f.action) for f in found] == [
