@@ -1,10 +1,11 @@
 """Checkpoints of a run directory, and the trained policy loaded back for evaluation.
 
 A run directory holds ``config.yaml`` (the resolved config), ``run_info.json`` and ``checkpoints/update_NNNNNNN.pt``.
-A checkpoint is written atomically and holds the model, optimizer, every random generator, the counters and the
-actor's slot state (see :meth:`agents.actor.Actor.state`), so that a killed run resumes exactly. The acting parts
-of a run (model, frozen HELM branch) are built from the config by :func:`build_agent`, the same way for training
-and for :func:`load_policy`.
+A checkpoint is written atomically with its size and SHA-256 (:data:`CHECKPOINT_MAGIC`), checked whenever it is read
+(a damaged one raises :class:`DamagedCheckpoint`, never loads), and holds the model, optimizer, every random
+generator, the counters and the actor's slot state (see :meth:`agents.actor.Actor.state`), so that a killed run
+resumes exactly. The acting parts of a run (model, frozen HELM branch) are built from the config by
+:func:`build_agent`, the same way for training and for :func:`load_policy`.
 """
 
 from __future__ import annotations

@@ -11,6 +11,12 @@ reset with its seed and replayed, which reproduces the environment state because
 its seed and actions (a digest of the observations checks this). With the same seed on CPU, a resumed run ends with
 the same weights, logs and records as an uninterrupted one.
 
+Faults (docs/reliability.md): a pre-emption signal (:mod:`agents.preemption`) ends the run after the update in
+progress, with a checkpoint (:class:`Preempted`); a non-finite loss, gradient or weight stops it at that update
+(:class:`TrainingDiverged`) and a failed write at that file (:class:`WriteFailed`), the newest checkpoint intact.
+Every checkpoint records what ``training.csv`` and ``eval/episodes.csv`` held at its step (:func:`run_records`), and a
+resume takes the newest checkpoint that is intact and matches them (:func:`agents.checkpoint.intact_checkpoint`).
+
 A run can be lengthened when it resumes (``Trainer.resume(run_dir, ["run.total_steps=N"])``, :data:`EXTENDABLE`):
 ``config.yaml`` then holds the new length, ``run_info.json`` records the extension, and the schedules that decay over
 the whole run go on from their current values to their final values at the new end (:meth:`Schedule.value`).
