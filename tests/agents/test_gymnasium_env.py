@@ -36,6 +36,8 @@ TINY = {
     },
     "eval": {"seeds": [100000, 100019], "repetitions": 2},
 }
+HELM = ("model.helm.lm=random", "model.helm.mem_len=3", "model.helm.random_layers=1", "model.helm.random_width=16")
+HELM = (*HELM, "model.helm.random_heads=2", "model.helm.random_vocab=32")
 SUCCESS = ("env.metric.key=success", "env.metric.label=Success Rate", "env.metric.low=0", "env.metric.high=1")
 
 
@@ -245,6 +247,8 @@ def test_plots_label_and_scale_the_configured_metric(tmp_path: Path) -> None:
         ("env.make_kwargs.observation=dict", "model.encoder=nature_cnn", "model.frame_stack=2", "model.grayscale=true"),
         ("env.make_kwargs.observation=image_chw", "env.image_layout=chw", "model.encoder=nature_cnn"),
         ("env.make_kwargs.action=multi_discrete", "env.vectorization=async", "run.workers=2", "run.worker_steps=8"),
+        ("env.frame_skip=2", "model.memory=gru"),
+        ("env.make_kwargs.observation=image", "model.encoder=nature_cnn", "model.memory=none", *HELM),
     ],
 )
 def test_the_baselines_train_on_every_kind_of_space(tmp_path: Path, overrides: tuple[str, ...]) -> None:
