@@ -56,11 +56,11 @@ METHOD_COLORS = {  # Okabe-Ito, colour-blind safe; fixed per method in every fig
     "stack16": "#cc79a7",  # reddish purple
     "helm": "#56b4e9",  # sky blue
     "trxl": "#000000",  # black
+    "lru": "#332288",  # Paul Tol's muted indigo
+    "ffm": "#117733",  # green
+    "mamba": "#882255",  # wine
 }
-SPARE_COLORS = (  # for other methods, in this order: Paul Tol's muted scheme, then Okabe-Ito's yellow
-    "#332288",
-    "#117733",
-    "#882255",
+SPARE_COLORS = (  # for other methods, in this order: the rest of Paul Tol's muted scheme, then Okabe-Ito's yellow
     "#44aa99",
     "#999933",
     "#aa4499",
@@ -79,6 +79,9 @@ METHOD_LABELS = {  # the paper's names of the agents, keyed by the method names 
     "trxl": "TrXL-PPO",
     "gtrxl": "GTrXL-PPO",
     "trxl_recon": "TrXL-PPO + recon.",  # observation reconstruction (ppo.reconstruction_coef)
+    "lru": "LRU-PPO",
+    "ffm": "FFM-PPO",
+    "mamba": "Mamba-PPO",
 }
 PART_LABELS = {"gru": "GRU", "lstm": "LSTM", "helm": "HELM"}  # parts of derived names such as gru-stack4
 STEPS_LABEL = "Environment steps (millions)"

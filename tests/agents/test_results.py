@@ -371,14 +371,14 @@ def test_task_names_and_digests_are_the_same_in_another_process() -> None:
 
 
 def test_the_seeds_of_a_sweep_cell_share_a_digest() -> None:
-    """configs/cpu/mm_grid_1.yaml: 6 methods x 3 seeds; the seeds of one cell agree, the cells differ, and the
+    """configs/cpu/mm_grid_1.yaml: 9 methods x 3 seeds; the seeds of one cell agree, the cells differ, and the
     committed runs' saved configs (torch threads set by the sweep) give their cell's digest."""
     panel = load_panel(ROOT / "configs" / "cpu" / "mm_grid_1.yaml", root=ROOT / "results" / "cpu")
     cells = defaultdict(set)
     for run in panel.runs:
         cells[(run.config.method, run.config.task)].add(results.config_digest(run.config))
-    assert len(cells) == 6 and all(len(digests) == 1 for digests in cells.values()), cells
-    assert len({digest for digests in cells.values() for digest in digests}) == 6
+    assert len(cells) == 9 and all(len(digests) == 1 for digests in cells.values()), cells
+    assert len({digest for digests in cells.values() for digest in digests}) == 9
     for run in panel.runs:
         saved = run.run_dir / "config.yaml"
         if saved.is_file():
