@@ -179,7 +179,9 @@ class Actor:
         terminated_t = torch.from_numpy(terminated).to(self.device)
         alive = ~terminated_t
         next_state = decision.next_state.to(self.model.memory.state_dtype)  # a bf16 acting copy keeps its state dtype
-        memory.recurrent = next_state * alive.view(-1, *([1] * (next_state.dim() - 1)))
+        if terminated.any():  # a window memory's state is large: copied only when a slot starts an episode
+            next_state = next_state * alive.view(-1, *([1] * (next_state.dim() - 1)))
+        memory.recurrent = next_state
         cache, matched, generation = self._acting_cache
         if matched is decision.next_state:  # the same state but for the slots cleared to an episode start
             self._acting_cache = (cache, memory.recurrent, generation)

@@ -16,6 +16,13 @@ per sequence, the records of the ``memory_length`` steps before its start and of
 dim), and attends with a banded causal mask: every query recomputed, every key and value the cached record (the
 authors' "one new hidden state per step", in training as well). No per-step copy of a window is ever made.
 
+Cost. Acting keeps the window's keys and values (:class:`KeyValueCache`, built once from the state when the actor
+starts acting with new weights or a new state, then extended in place by one entry per step), so a decision projects
+one entry per block, not the whole window; the state, the records and a checkpoint stay the layer inputs, so a
+resume rebuilds the same cache. The training pass runs the single-step layers on the real steps only (the padded
+(S, P) layout exists for the attention alone) and projects keys and values only for the records some query reads
+(a sequence that starts its episode reads none of the window before it).
+
 Scaling is 1/sqrt(dim / heads), the scaled dot product's own: it keeps each head's logits at unit variance whatever
 the number of heads (the authors' 1/sqrt(dim) shrinks them by sqrt(heads), a leftover of the shared-projection
 variant). Positional encodings: ``relative`` adds a content-to-position term q . W_r sin(d) to the logits, d the
