@@ -32,10 +32,12 @@ class LRUBlock(nn.Module):
         radius_sq = u1 * (config.r_max**2 - config.r_min**2) + config.r_min**2  # uniform on the ring's area
         self.nu_log = nn.Parameter(torch.log(-0.5 * torch.log(radius_sq)))
         self.theta_log = nn.Parameter(torch.log(config.max_phase * u2 + 1e-8))
-        self.input_re = nn.Parameter(torch.randn(states, dim) / math.sqrt(2 * dim))
-        self.input_im = nn.Parameter(torch.randn(states, dim) / math.sqrt(2 * dim))
-        self.output_re = nn.Parameter(torch.randn(dim, states) / math.sqrt(states))
-        self.output_im = nn.Parameter(torch.randn(dim, states) / math.sqrt(states))
+        # B and C with their real and imaginary parts interleaved (B's rows, C's columns: re, im, re, im, ...), so
+        # that B u and Re(C h) are one contiguous product each on the (..., states, 2) layout of a complex tensor
+        self.input_weight = nn.Parameter(torch.randn(2 * states, dim) / math.sqrt(2 * dim))
+        output = torch.randn(dim, states, 2) / math.sqrt(states)
+        output[..., 1] *= -1  # Re(C h) = C_re h_re - C_im h_im: the column of h_im holds -C_im
+        self.output_weight = nn.Parameter(output.reshape(dim, 2 * states))
         self.skip = nn.Parameter(torch.randn(dim))
         self.norm = nn.LayerNorm(dim)
         self.out = orthogonal(nn.Linear(dim, dim), 1.0)
@@ -48,14 +50,13 @@ class LRUBlock(nn.Module):
         u = widen(self.norm(x))
         decay = self.decay().to(complex_dtype(u.dtype))
         gamma = torch.sqrt(1 - decay.abs() ** 2)
-        inputs = (
-            torch.complex(u @ self.input_re.T.to(u.dtype), u @ self.input_im.T.to(u.dtype)) * gamma
-        )  # (S, T, states)
+        projected = (u @ self.input_weight.T.to(u.dtype)).unflatten(-1, (self.states, 2))
+        inputs = torch.view_as_complex(projected) * gamma  # gamma B u: (S, T, states)
         start = torch.view_as_complex(widen(state).reshape(-1, self.states, 2).contiguous())
         h = linear_scan(decay.view(1, 1, -1), inputs, start)
-        y = (
-            h.real @ self.output_re.T.to(u.dtype) - h.imag @ self.output_im.T.to(u.dtype) + self.skip * u
-        )  # Re(C h) + D u
+        s, t = h.shape[:2]
+        readout = torch.view_as_real(h).reshape(s, t, self.state_size) @ self.output_weight.T.to(u.dtype)
+        y = readout + self.skip * u  # Re(C h) + D u
         y = self.out(F.gelu(y).to(x.dtype))
         final = torch.view_as_real(h[:, -1]).reshape(-1, self.state_size)
         return x + y, final

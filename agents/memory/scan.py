@@ -45,31 +45,69 @@ def complex_dtype(real: torch.dtype) -> torch.dtype:
     return {torch.float32: torch.complex64, torch.float64: torch.complex128}[real]
 
 
-def _chunked_scan(a: Tensor, b: Tensor, start: Tensor) -> Tensor:
-    """h_t = a_t h_{t-1} + b_t over dim 1 of (S, T, *D) tensors from ``start`` (S, *D), without autograd."""
+def _chunk_size(t: int) -> int:
+    """Steps per chunk for T steps: a divisor of T near sqrt(T) when there is one (no padding), else ceil(sqrt(T))."""
+    root = math.isqrt(t)
+    for size in range(root, max(1, root // 2) - 1, -1):  # the largest divisor in [sqrt(T) / 2, sqrt(T)]
+        if t % size == 0 and size > 1:
+            return size
+    return max(1, math.isqrt(t - 1) + 1)
+
+
+def _chunks(a: Tensor, b: Tensor) -> tuple[Tensor, Tensor, int]:
+    """``a``, ``b`` (S, T, *D) as (S, n, C, *D) chunks, padded at the end with steps (a = 1, b = 0) that change
+    nothing before them; and T."""
     s, t = b.shape[:2]
-    channels = b.shape[2:]
-    if t == 1:
-        return (a[:, 0] * start + b[:, 0]).unsqueeze(1)
-    chunk = max(1, math.isqrt(t - 1) + 1)  # ceil(sqrt(T)): as many chunks as steps per chunk
+    chunk = _chunk_size(t)
     n = -(-t // chunk)
     pad = n * chunk - t
-    if pad:  # padded steps (a = 1, b = 0) at the end change nothing before them
-        a = torch.cat((a, a.new_ones((s, pad, *channels))), dim=1)
-        b = torch.cat((b, b.new_zeros((s, pad, *channels))), dim=1)
-    a = a.reshape(s, n, chunk, *channels)
-    b = b.reshape(s, n, chunk, *channels)
+    if pad:
+        a = torch.cat((a, a.new_ones((s, pad, *b.shape[2:]))), dim=1)
+        b = torch.cat((b, b.new_zeros((s, pad, *b.shape[2:]))), dim=1)
+    return a.reshape(s, n, chunk, *b.shape[2:]), b.reshape(s, n, chunk, *b.shape[2:]), t
+
+
+def _chunked_scan(a: Tensor, b: Tensor, start: Tensor) -> Tensor:
+    """h_t = a_t h_{t-1} + b_t over dim 1 of (S, T, *D) tensors from ``start`` (S, *D), without autograd."""
+    if b.shape[1] == 1:
+        return (a[:, 0] * start + b[:, 0]).unsqueeze(1)
+    a, b, t = _chunks(a, b)
+    s, n, chunk = b.shape[:3]
     local = torch.empty_like(b)  # (1) every chunk from a zero state, all chunks at once
+    decay = torch.empty_like(b)  # decay[:, j, i] = a_{j,0} ... a_{j,i}
     local[:, :, 0] = b[:, :, 0]
+    decay[:, :, 0] = a[:, :, 0]
     for i in range(1, chunk):
         torch.addcmul(b[:, :, i], a[:, :, i], local[:, :, i - 1], out=local[:, :, i])
-    decay = torch.cumprod(a, dim=2)  # decay[:, j, i] = a_{j,0} ... a_{j,i}
-    carried = torch.empty((s, n, *channels), dtype=b.dtype, device=b.device)  # (2) the state entering each chunk
+        torch.mul(a[:, :, i], decay[:, :, i - 1], out=decay[:, :, i])
+    carried = torch.empty_like(b[:, :, 0])  # (2) the state entering each chunk
     carried[:, 0] = start
     for j in range(1, n):
         torch.addcmul(local[:, j - 1, -1], decay[:, j - 1, -1], carried[:, j - 1], out=carried[:, j])
     h = local.addcmul_(decay, carried.unsqueeze(2))  # (3) each chunk's carried-in state, decayed
-    return h.reshape(s, n * chunk, *channels)[:, :t]
+    return h.reshape(s, n * chunk, *b.shape[3:])[:, :t]
+
+
+def _chunked_reverse_scan(a: Tensor, d: Tensor) -> Tensor:
+    """g_t = d_t + a_{t+1} g_{t+1} over dim 1 of (S, T, *D) tensors, g_{T-1} = d_{T-1}: the backward pass's scan,
+    run backwards in place of flipping and shifting copies (the same three phases as :func:`_chunked_scan`)."""
+    if d.shape[1] == 1:
+        return d.clone()
+    a, d, t = _chunks(a, d)
+    s, n, chunk = d.shape[:3]
+    local = torch.empty_like(d)  # (1) every chunk from a zero state after its end
+    decay = torch.empty_like(d)  # decay[:, j, i] = a_{j,i+1} ... a_{j,C-1} a_{j+1,0}: from step (j, i) to chunk j + 1
+    local[:, :, -1] = d[:, :, -1]
+    decay[:, :-1, -1] = a[:, 1:, 0]
+    decay[:, -1, -1] = 0  # nothing comes after the last chunk
+    for i in range(chunk - 2, -1, -1):
+        torch.addcmul(d[:, :, i], a[:, :, i + 1], local[:, :, i + 1], out=local[:, :, i])
+        torch.mul(a[:, :, i + 1], decay[:, :, i + 1], out=decay[:, :, i])
+    carried = torch.zeros_like(d[:, :, 0])  # (2) g at the first step of the next chunk
+    for j in range(n - 2, -1, -1):
+        torch.addcmul(local[:, j + 1, 0], decay[:, j + 1, 0], carried[:, j + 1], out=carried[:, j])
+    g = local.addcmul_(decay, carried.unsqueeze(2))  # (3)
+    return g.reshape(s, n * chunk, *d.shape[3:])[:, :t]
 
 
 class LinearScan(torch.autograd.Function):
@@ -84,12 +122,14 @@ class LinearScan(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad: Tensor) -> tuple[Tensor | None, Tensor | None, Tensor | None]:  # type: ignore[override]
         a, start, h = ctx.saved_tensors
-        # g_t = grad_t + conj(a_{t+1}) g_{t+1}: the forward scan over reversed time with the decays shifted by one
-        shifted = torch.cat((a[:, 1:], a.new_zeros((a.shape[0], 1, *a.shape[2:]))), dim=1).conj()
-        g = _chunked_scan(shifted.flip(1), grad.flip(1), torch.zeros_like(start)).flip(1)
-        previous = torch.cat((start.unsqueeze(1), h[:, :-1]), dim=1)
-        grad_a = g * previous.conj() if ctx.needs_input_grad[0] else None
-        grad_start = a[:, 0].conj() * g[:, 0] if ctx.needs_input_grad[2] else None
+        conj_a = a.conj().resolve_conj()  # a no-op for real tensors
+        g = _chunked_reverse_scan(conj_a, grad.contiguous())  # g_t = grad_t + conj(a_{t+1}) g_{t+1}
+        grad_a = None
+        if ctx.needs_input_grad[0]:  # g_t conj(h_{t-1}), h_{-1} the start state
+            grad_a = torch.empty_like(g)
+            torch.mul(g[:, 1:], h[:, :-1].conj(), out=grad_a[:, 1:])
+            torch.mul(g[:, 0], start.conj(), out=grad_a[:, 0])
+        grad_start = conj_a[:, 0] * g[:, 0] if ctx.needs_input_grad[2] else None
         return grad_a, g, grad_start
 
 
