@@ -42,6 +42,20 @@ class LRUBlock(nn.Module):
         self.norm = nn.LayerNorm(dim)
         self.out = orthogonal(nn.Linear(dim, dim), 1.0)
 
+    def _load_from_state_dict(self, state_dict: dict, prefix: str, *args: object, **kwargs: object) -> None:
+        """Checkpoints written before B and C were interleaved (6b9ff9a..10bf6ec) hold them as four matrices
+        (input_re/_im, output_re/_im): converted here, so those runs still load, evaluate and resume."""
+        old = [f"{prefix}{name}" for name in ("input_re", "input_im", "output_re", "output_im")]
+        if all(key in state_dict for key in old):
+            input_re, input_im, output_re, output_im = (state_dict.pop(key) for key in old)
+            state_dict[f"{prefix}input_weight"] = torch.stack((input_re, input_im), dim=1).reshape(
+                -1, input_re.shape[1]
+            )
+            state_dict[f"{prefix}output_weight"] = torch.stack((output_re, -output_im), dim=2).reshape(
+                output_re.shape[0], -1
+            )
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+
     def decay(self) -> Tensor:
         """lambda (states,), complex, |lambda| < 1."""
         return torch.exp(torch.complex(-torch.exp(self.nu_log), torch.exp(self.theta_log)))

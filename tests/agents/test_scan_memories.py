@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents.config import ConfigError, ModelConfig, config_from_dict
+from agents.config import ConfigError, LruConfig, ModelConfig, config_from_dict
 from agents.memory import build_memory, memory_class
 from agents.memory.scan import linear_scan, reference_scan
 from agents.trainer import Trainer
@@ -214,3 +214,23 @@ def test_an_external_memory_trains_evaluates_and_names_its_runs(tmp_path: Path) 
     assert isinstance(trainer.model.memory, LeakyMemory) and trainer.model.memory.leak == 0.8
     with open(tmp_path / "eval" / "episodes.csv") as records:
         assert len(records.readlines()) == 1 + 3 * 1  # the header and 3 seeds x 1 repetition at update 2
+
+
+def test_lru_checkpoints_with_separate_real_and_imaginary_matrices_still_load() -> None:
+    """The earlier layout of B and C (input_re/_im, output_re/_im) loads into the interleaved one and computes the
+    same outputs: y = Re(C h) + D u with h driven by (B_re u, B_im u)."""
+    torch.manual_seed(0)
+    memory = build_memory(ModelConfig(memory="lru", memory_size=6, lru=LruConfig(state_size=4)), 5).double()
+    block = memory.blocks[0]
+    old = {k: v for k, v in memory.state_dict().items() if "input_weight" not in k and "output_weight" not in k}
+    input_re, input_im = torch.randn(4, 6).double(), torch.randn(4, 6).double()
+    output_re, output_im = torch.randn(6, 4).double(), torch.randn(6, 4).double()
+    old |= {"blocks.0.input_re": input_re, "blocks.0.input_im": input_im}
+    old |= {"blocks.0.output_re": output_re, "blocks.0.output_im": output_im}
+    memory.load_state_dict(old)
+    u = torch.randn(2, 3, 6, dtype=torch.float64)
+    projected = torch.view_as_complex((u @ block.input_weight.T).unflatten(-1, (4, 2)))
+    torch.testing.assert_close(projected, torch.complex(u @ input_re.T, u @ input_im.T))
+    h = torch.randn(2, 3, 4, dtype=torch.complex128)
+    readout = torch.view_as_real(h).reshape(2, 3, 8) @ block.output_weight.T
+    torch.testing.assert_close(readout, h.real @ output_re.T - h.imag @ output_im.T)
