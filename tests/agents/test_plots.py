@@ -264,4 +264,7 @@ def test_plot_results_finds_the_options_of_older_records_in_the_saved_configs(tm
         "16-Stack",
         "HELM",
         "TrXL-PPO",
+        "LRU-PPO",
+        "FFM-PPO",
+        "Mamba-PPO",
     ]

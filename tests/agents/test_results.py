@@ -453,18 +453,19 @@ def test_configs_are_compared_within_a_cell_and_by_each_runs_latest_rows(tmp_pat
 
 @pytest.mark.parametrize("directory", ["results/cpu/mm_grid_1/results", "results/cpu/mm_grid_1_delay4/results"])
 def test_committed_records_without_the_new_columns_still_load(directory: str) -> None:
-    """The CPU panels' first runs predate the env_options and config_digest columns; the TrXL runs added to
-    mm_grid_1 later carry them, one digest for the cell. Both kinds load and aggregate side by side."""
+    """The CPU panels' first runs predate the env_options and config_digest columns; the TrXL, LRU, FFM and Mamba
+    runs added to mm_grid_1 later carry them, one digest per cell. Both kinds load and aggregate side by side."""
     loaded = results.read_results(ROOT / directory)
     for table in (loaded.episodes, loaded.training):
         digests = dict.fromkeys(table["method"].tolist(), "")
         for method, digest in zip(table["method"].tolist(), table[results.CONFIG_COLUMN].tolist(), strict=True):
             assert digests.setdefault(method, digest) in ("", digest)
             digests[method] = digest
+        later = {"trxl", "lru", "ffm", "mamba"}
         assert {method for method, digest in digests.items() if digest} == (
-            {"trxl"} if "delay4" not in directory else set()
+            later if "delay4" not in directory else set()
         )
-    first_runs = [m != "trxl" for m in loaded.episodes["method"].tolist()]
+    first_runs = [m not in {"trxl", "lru", "ffm", "mamba"} for m in loaded.episodes["method"].tolist()]
     assert {o for o, old in zip(loaded.episodes[results.OPTIONS_COLUMN].tolist(), first_runs, strict=True) if old} == {
         ""
     }
