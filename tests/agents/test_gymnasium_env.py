@@ -20,6 +20,7 @@ from agents.plots import curves_figure, final_figure
 from agents.results import read_episodes
 from agents.trainer import Trainer
 from envs.gymnasium_core import GymnasiumCore, SeedingError, UnsupportedSpaceError
+from tests.support.interrupt import kill_after
 from tests.support.tiny_env import ENV_ID, TinyMemoryEnv
 
 TINY = {
@@ -270,23 +271,12 @@ def test_every_memory_trains_on_a_gymnasium_environment(tmp_path: Path, memory: 
     assert len(history) == 2 and all(np.isfinite(m["losses/policy_loss"]) for m in history)
 
 
-def _kill_after(trainer: Trainer, updates: int) -> None:
-    run_update = trainer.train_update
-
-    def maybe_die() -> dict[str, float]:
-        if trainer.update == updates:
-            raise KeyboardInterrupt
-        return run_update()
-
-    trainer.train_update = maybe_die  # type: ignore[method-assign]
-
-
 def test_resume_starts_new_episodes_and_is_deterministic(tmp_path: Path) -> None:
     """A gymnasium environment's state is not in the checkpoint: a resumed run starts every slot on its next seed.
     Two resumes of the same checkpoint end with the same weights and logs."""
     config = _config("run.total_steps=3072", "run.checkpoint_interval=2", "eval.interval=3")
     killed = Trainer(config, tmp_path / "a")
-    _kill_after(killed, 3)
+    kill_after(killed, 3)
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     shutil.copytree(tmp_path / "a", tmp_path / "b")

@@ -68,23 +68,6 @@ def test_helm_with_a_random_transformer_learns_proof_of_memory(tmp_path: Path) -
 
 
 @pytest.mark.slow
-def test_trxl_learns_proof_of_memory_and_succeeds_on_novel_seeds(tmp_path: Path) -> None:
-    """TrXL-PPO (configs/proof_of_memory/trxl.yaml) learns the cue task and keeps >= 0.95 success on 30 novel seeds
-    x 5 repetitions, evaluated through the same actor with sampled actions (measured: 0.998 in the last updates)."""
-    from agents.evaluation import evaluate
-
-    config = load_config(CONFIGS / "trxl.yaml", ["run.progress_bar=false"])
-    assert config.model.memory == "trxl" and not config.model.previous_action
-    trainer = Trainer(config, tmp_path)
-    history = trainer.train()
-    assert _success(history[:2], last=2) < 0.7
-    assert _success(history, last=4) >= 0.95
-    low, high = config.eval_seeds
-    records = evaluate(trainer.model, None, config, list(range(low, high + 1)), 5, sampling_seed=0)
-    assert len(records) == 150 and np.mean([r["metric"] for r in records]) >= 0.95
-
-
-@pytest.mark.slow
 def test_gtrxl_with_observation_reconstruction_learns_proof_of_memory(tmp_path: Path) -> None:
     """GTrXL gates and the reconstruction loss, trained for real: the gated model learns the cue task and the
     decoder learns to redraw the observations (BCE from ~0.67 to ~0.001). Measured with this seed: success 1.0 from
@@ -99,14 +82,15 @@ def test_gtrxl_with_observation_reconstruction_learns_proof_of_memory(tmp_path: 
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("memory", ["lru", "ffm", "mamba"])
-def test_scan_memories_learn_proof_of_memory_and_succeed_on_novel_seeds(tmp_path: Path, memory: str) -> None:
-    """LRU, FFM and Mamba (configs/proof_of_memory/<memory>.yaml) start at chance, learn the cue task and keep
-    >= 0.95 success on 30 novel seeds x 5 repetitions (measured: LRU 0.99, FFM 1.0, Mamba 0.99 on novel seeds)."""
+@pytest.mark.parametrize("memory", ["trxl", "lru", "ffm", "mamba"])
+def test_memories_learn_proof_of_memory_and_succeed_on_novel_seeds(tmp_path: Path, memory: str) -> None:
+    """TrXL, LRU, FFM and Mamba (configs/proof_of_memory/<memory>.yaml) start at chance, learn the cue task and keep
+    >= 0.95 success on 30 novel seeds x 5 repetitions, evaluated through the same actor with sampled actions
+    (measured: TrXL 0.998 in the last updates; LRU 0.99, FFM 1.0, Mamba 0.99 on novel seeds)."""
     from agents.evaluation import evaluate
 
     config = load_config(CONFIGS / f"{memory}.yaml", ["run.progress_bar=false"])
-    assert config.model.memory == memory
+    assert config.model.memory == memory and not config.model.previous_action
     trainer = Trainer(config, tmp_path)
     history = trainer.train()
     assert _success(history[:2], last=2) < 0.7

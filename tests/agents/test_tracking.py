@@ -17,6 +17,7 @@ from agents.checkpoint import check_checkpoint_config
 from agents.config import ConfigError, config_from_dict, config_to_dict
 from agents.io import git_revision
 from agents.trainer import Trainer
+from tests.support.interrupt import kill_after
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 2}},
@@ -58,17 +59,6 @@ class FakeWandb(types.ModuleType):
         return Run()
 
 
-def _kill_after(trainer: Trainer, updates: int) -> None:
-    run_update = trainer.train_update
-
-    def maybe_die() -> dict[str, float]:
-        if trainer.update == updates:
-            raise KeyboardInterrupt
-        return run_update()
-
-    trainer.train_update = maybe_die  # type: ignore[method-assign]
-
-
 def _tensorboard(run_dir: Path) -> dict[tuple[str, int], float]:
     points = {}
     for events in run_dir.glob("events.out.tfevents.*"):
@@ -87,7 +77,7 @@ def test_wandb_gets_the_tensorboard_scalars_config_and_revision_and_a_resume_con
     config = config_from_dict(TINY, list(WANDB))
     run_dir = tmp_path / "run"
     killed = Trainer(config, run_dir)
-    _kill_after(killed, 2)
+    kill_after(killed, 2)
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     assert fake.finished == 1  # closed on the way out, like the TensorBoard writer
@@ -134,7 +124,7 @@ def test_wandb_offline_mode_writes_one_local_run_that_a_resume_continues(
     config = config_from_dict(TINY, [*WANDB, "eval.interval=0"])
     run_dir = tmp_path / "run"
     killed = Trainer(config, run_dir)
-    _kill_after(killed, 2)
+    kill_after(killed, 2)
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     Trainer.resume(run_dir).train()

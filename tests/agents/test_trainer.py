@@ -22,6 +22,7 @@ from agents.sequences import pad_sequences, split_sequences
 from agents.trainer import Trainer, TrainingDiverged
 from scripts import train as train_script
 from tests.support.dict_env import DictCore
+from tests.support.interrupt import kill_after
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
@@ -54,18 +55,6 @@ TRXL = (*TRXL, "env.options.delay=4")
 
 def _config(*overrides: str, raw: dict | None = None):
     return config_from_dict(raw or TINY, list(overrides))
-
-
-def _kill_after(trainer: Trainer, updates: int) -> None:
-    """Make ``trainer.train()`` die like a killed process once ``updates`` updates are done."""
-    run_update = trainer.train_update
-
-    def maybe_die() -> dict[str, float]:
-        if trainer.update == updates:
-            raise KeyboardInterrupt
-        return run_update()
-
-    trainer.train_update = maybe_die  # type: ignore[method-assign]
 
 
 def _assert_same_weights(a: Trainer, b: Trainer) -> None:
@@ -121,7 +110,7 @@ def _check_resume(tmp_path: Path, config) -> None:
     uninterrupted.train()
 
     killed = Trainer(config, tmp_path / "b")
-    _kill_after(killed, 5)
+    kill_after(killed, 5)
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     assert latest_checkpoint(tmp_path / "b").name == "update_0000004.pt"
@@ -200,12 +189,12 @@ def test_an_extended_run_resumes_exactly_and_its_schedules_go_on_from_final(tmp_
 
     Trainer(config, tmp_path / "b").train()
     killed = Trainer.resume(tmp_path / "b", lengthen)
-    _kill_after(killed, 3)  # before its first update: the newest checkpoint is the 3-update run's
+    kill_after(killed, 3)  # before its first update: the newest checkpoint is the 3-update run's
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     killed = Trainer.resume(tmp_path / "b")  # config.yaml says 6 updates, the checkpoint 3: extended at update 3
     assert killed.extensions == [(3, 3)] and killed.extension is None
-    _kill_after(killed, 5)
+    kill_after(killed, 5)
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     _next_second()
@@ -248,7 +237,7 @@ def test_resume_with_dict_observations_and_multidiscrete_actions(tmp_path: Path,
     history = uninterrupted.train()
     assert "env/hits" in history[-1] and not any("label" in key for key in history[-1])
     killed = Trainer(config, tmp_path / "b")
-    _kill_after(killed, 4)
+    kill_after(killed, 4)
     with pytest.raises(KeyboardInterrupt):
         killed.train()
     resumed = Trainer.resume(tmp_path / "b")
