@@ -179,8 +179,9 @@ class Actor:
         terminated_t = torch.from_numpy(terminated).to(self.device)
         alive = ~terminated_t
         next_state = decision.next_state.to(self.model.memory.state_dtype)  # a bf16 acting copy keeps its state dtype
-        if terminated.any():  # a window memory's state is large: copied only when a slot starts an episode
-            next_state = next_state * alive.view(-1, *([1] * (next_state.dim() - 1)))
+        if terminated.any():  # zeroed in place, row by row: a window memory's state is megabytes, a copy per end costs
+            with torch.inference_mode():  # the state came out of inference mode (an inference tensor)
+                next_state[terminated_t] = 0.0
         memory.recurrent = next_state
         cache, matched, generation = self._acting_cache
         if matched is decision.next_state:  # the same state but for the slots cleared to an episode start
@@ -314,7 +315,8 @@ class Actor:
         """The slot memory of an episode start in ``slots`` (frame stacks and HELM memory start at the observation)."""
         memory = self.memory
         index = torch.from_numpy(slots).to(self.device)
-        memory.recurrent[index] = 0.0
+        with torch.inference_mode():  # the state may be a step's output, an inference tensor
+            memory.recurrent[index] = 0.0
         memory.previous_action[index] = -1
         memory.previous_reward[index] = 0.0
         memory.episode_step[index] = 0

@@ -19,7 +19,10 @@ authors' "one new hidden state per step", in training as well). No per-step copy
 Cost. Acting keeps the window's keys and values (:class:`KeyValueCache`, built once from the state when the actor
 starts acting with new weights or a new state, then extended in place by one entry per step), so a decision projects
 one entry per block, not the whole window; the state, the records and a checkpoint stay the layer inputs, so a
-resume rebuilds the same cache. The training pass runs the single-step layers on the real steps only (the padded
+resume rebuilds the same cache; the window moves on without being copied (:func:`shift_window`), and a slot
+that starts an episode is cleared in place. What is left of a decision is bound by reading memory: the weights
+(17.6 MB at 3 x 384 with the MM Grid CNN's 3,136 inputs, fp32) and the window's keys and values (17.5 MB at 16
+slots x 119), every step. The training pass runs the single-step layers on the real steps only (the padded
 (S, P) layout exists for the attention alone) and projects keys and values only for the records some query reads
 (a sequence that starts its episode reads none of the window before it).
 
@@ -76,6 +79,44 @@ class GRUGate(nn.Module):
         return (1 - z) * x + z * torch.tanh(y_g + self.candidate(r * x))
 
 
+def shift_window(window: Tensor, entry: Tensor) -> Tensor:
+    """``window`` (B, M, ...) one step on: its oldest entry dropped, ``entry`` (B, ...) appended, oldest first.
+
+    A copy of the window would move M entries to add one (8.8 MB a step at 16 slots x 119 x 3 x 384, fp32), so
+    without autograd the window is a view of a buffer twice its length (memory stays bounded by the window): a step
+    writes the entry just after the view and returns the view one entry later, and only a full buffer is copied (the
+    newest M - 1 entries into a new one, once every M steps). Each window is moved on in place at most once (the
+    buffer remembers where its newest view ends): a second step from the same window copies, so every window
+    returned keeps its entries. (Views made in inference mode keep no ``_base``: the view names its buffer.)"""
+    entry = entry.to(window.dtype)
+    length = window.shape[1]
+    if torch.is_grad_enabled() and (window.requires_grad or entry.requires_grad):
+        return torch.cat((window[:, 1:], entry.unsqueeze(1)), dim=1)
+    buffer, start = getattr(window, "window_buffer", None), getattr(window, "window_start", 0)
+    if buffer is not None and buffer.window_end == start + length < buffer.shape[1] and _is_view(window, buffer, start):
+        buffer[:, start + length] = entry
+        buffer.window_end, start = start + length + 1, start + 1
+    else:
+        buffer = window.new_empty((window.shape[0], 2 * length, *window.shape[2:]))
+        buffer[:, : length - 1] = window[:, 1:]
+        buffer[:, length - 1] = entry
+        buffer.window_end, start = length, 0
+    shifted = buffer[:, start : start + length]
+    shifted.window_buffer, shifted.window_start = buffer, start
+    return shifted
+
+
+def _is_view(window: Tensor, buffer: Tensor, start: int) -> bool:
+    """Whether ``window`` is ``buffer[:, start : start + M]`` (not a copy that kept the attributes)."""
+    return (
+        window.untyped_storage().data_ptr() == buffer.untyped_storage().data_ptr()
+        and window.storage_offset() == buffer.storage_offset() + start * buffer.stride(1)
+        and window.stride() == buffer.stride()
+        and window.shape[0] == buffer.shape[0]
+        and window.shape[2:] == buffer.shape[2:]
+    )
+
+
 @dataclass
 class KeyValueCache:
     """What acting reads of the slots' windows, built from their states by :meth:`TransformerXL.acting_cache` and
@@ -111,14 +152,13 @@ class Block(nn.Module):
         self.gates = nn.ModuleList(GRUGate(dim, config.gating_bias) for _ in range(2)) if config.gating else None
 
     def _project(self, x: Tensor, layers: tuple[nn.Linear, ...]) -> tuple[Tensor, ...]:
-        """(..., dim) through ``layers`` in one matrix product (their weights side by side: ``x`` is read once) ->
-        one (..., heads, head_dim) per layer."""
-        weight = torch.cat([layer.weight for layer in layers]) if len(layers) > 1 else layers[0].weight
-        bias = torch.cat([layer.bias for layer in layers]) if len(layers) > 1 else layers[0].bias
+        """(..., dim) through each of ``layers`` -> one (..., heads, head_dim) per layer. One product per layer, not
+        one over their weights side by side: joining the weights would copy them at every call, which costs more
+        than the product itself when acting (16 rows)."""
         if self.shared:  # every head's slice through the same small projections
-            projected = F.linear(x.unflatten(-1, (self.heads, self.head_dim)), weight, bias)
-            return projected.unflatten(-1, (len(layers), self.head_dim)).unbind(-2)
-        return F.linear(x, weight, bias).unflatten(-1, (len(layers), self.heads, self.head_dim)).unbind(-3)
+            x = x.unflatten(-1, (self.heads, self.head_dim))
+            return tuple(layer(x) for layer in layers)
+        return tuple(layer(x).unflatten(-1, (self.heads, self.head_dim)) for layer in layers)
 
     def keys_values(self, memory: Tensor) -> tuple[Tensor, Tensor]:
         """Keys and values (..., heads, head_dim) of cached inputs (..., dim)."""
@@ -140,8 +180,10 @@ class Block(nn.Module):
         terms are query 0's shifted by p keys, so one product per query and distance (S, heads, P, M) and a skew
         (pad each row to K + 1, read the rows K apart) place them, where a gather would need an index per logit;
         the keys out of reach get other terms, which the mask drops."""
-        by_distance = q @ table  # (S, H, P, M)
-        s, h, p, m = by_distance.shape
+        s, h, p, _ = q.shape
+        m = table.shape[-1]
+        # (H, S P, hd) @ (H, hd, M): the table is read once per head, not broadcast to a copy per sequence
+        by_distance = (q.transpose(0, 1).reshape(h, s * p, -1) @ table).view(h, s, p, m).transpose(0, 1)
         return F.pad(by_distance, (0, keys + 1 - m)).flatten(-2)[..., : p * keys].view(s, h, p, keys)
 
     def attend(self, q: Tensor, k: Tensor, v: Tensor, valid: Tensor, table: Tensor | None) -> Tensor:
@@ -264,8 +306,7 @@ class TransformerXL(Memory):
             cache.keys[layer][:, :, cache.oldest] = new_key  # after the attention: a step never attends to itself
             cache.values[layer][:, :, cache.oldest] = new_value
         cache.oldest = (cache.oldest + 1) % length
-        next_state = torch.cat((state[:, 1:], torch.stack(inputs, dim=1).unsqueeze(1).to(state.dtype)), dim=1)
-        return h, next_state
+        return h, shift_window(state, torch.stack(inputs, dim=1))
 
     def record(self, state: Tensor, next_state: Tensor) -> Tensor:
         return next_state[:, -1]  # the step's own layer inputs, the newest entry of its window

@@ -11,6 +11,7 @@ from agents.actor import refresh_copy
 from agents.buffer import RolloutBuffer
 from agents.config import ConfigError, TrxlConfig, config_from_dict
 from agents.memory import TransformerXL
+from agents.memory.transformer import shift_window
 from agents.sequences import pad_sequences, split_sequences
 from agents.trainer import Trainer
 
@@ -278,6 +279,30 @@ def test_a_20000_step_endless_episode_keeps_memory_bounded_and_equal_to_its_wind
         mask = torch.ones(1, 1, dtype=torch.bool)
         recomputed = memory.sequences(features[-1], window, mask, torch.tensor([steps - 1]))
     torch.testing.assert_close(recomputed, output, atol=1e-6, rtol=1e-6)
+
+
+def test_shifting_the_window_in_place_keeps_every_window_it_returned() -> None:
+    """Acting moves the window on without copying it (a view of a buffer twice its length): over several buffers'
+    worth of steps every window equals the one a copy gives and stays so; a second step from the same window (a
+    branch) gets its own entries and leaves the first branch's alone; with autograd it is a plain copy."""
+    length = 3
+    with torch.inference_mode():
+        window, copied, returned = torch.zeros(2, length, 4), torch.zeros(2, length, 4), []
+        for t in range(4 * length + 1):
+            entry = torch.full((2, 4), float(t + 1))
+            window, copied = shift_window(window, entry), torch.cat((copied[:, 1:], entry[:, None]), dim=1)
+            returned.append((window, copied.clone()))
+            assert window.window_buffer.shape[1] == 2 * length  # a view of the buffer, not a copy
+        for shifted, expected in returned:
+            torch.testing.assert_close(shifted, expected, rtol=0, atol=0)
+        first = shift_window(window, torch.full((2, 4), -1.0))
+        second = shift_window(window, torch.full((2, 4), -2.0))
+        assert float(first[0, -1, 0]) == -1.0 and float(second[0, -1, 0]) == -2.0
+        torch.testing.assert_close(first[:, :-1], window[:, 1:], rtol=0, atol=0)
+    leaf = torch.zeros(2, length, 4, requires_grad=True)
+    shifted = shift_window(leaf, torch.ones(2, 4))
+    shifted.sum().backward()
+    assert not hasattr(shifted, "window_buffer") and leaf.grad is not None
 
 
 def test_gtrxl_gates_start_near_the_identity_and_change_the_outputs() -> None:
