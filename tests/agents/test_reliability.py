@@ -29,23 +29,15 @@ from agents.faults import FaultSpecError, parse_faults
 from agents.preemption import EXIT_PREEMPTED, Preempted, deferred_signals, raising_preempted
 from agents.trainer import Trainer, TrainingDiverged, WriteFailed, training_log_text
 from scripts import train as train_script
+from tests.support.interrupt import kill_after
+from tests.support.tiny_run import tiny_run, with_run
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = {
-    "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
-    "model": {"memory": "gru", "memory_size": 16, "hidden_size": 16, "vector_encoder_size": 8},
-    "ppo": {"epochs": 2, "minibatches": 2},
-    "run": {
-        "total_steps": 6 * 64,  # 6 updates of 4 workers x 16 steps
-        "workers": 4,
-        "worker_steps": 16,
-        "seed": 3,
-        "progress_bar": False,
-        "torch_threads": 1,
-        "checkpoint_interval": 2,
-    },
-    "eval": {"interval": 3, "seeds": [100_000, 100_002], "repetitions": 2},
-}
+TINY = tiny_run(
+    {"epochs": 2, "minibatches": 2},
+    {"total_steps": 6 * 64, "seed": 3, "torch_threads": 1, "checkpoint_interval": 2},  # 6 updates
+    {"interval": 3, "seeds": [100_000, 100_002], "repetitions": 2},
+)
 
 
 @pytest.fixture(autouse=True)
@@ -55,7 +47,14 @@ def _fresh_fault_counts(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def _config(**run: object):
-    return config_from_dict({**TINY, "run": {**TINY["run"], **run}})
+    return config_from_dict(with_run(TINY, **run))
+
+
+def _config_file(tmp_path: Path, **run: object) -> Path:
+    """The tiny run's config as a YAML file in ``tmp_path``."""
+    config_path = tmp_path / "tiny.yaml"
+    config_path.write_text(yaml.safe_dump(with_run(TINY, **run)))
+    return config_path
 
 
 @pytest.fixture(scope="module")
@@ -105,8 +104,7 @@ def test_a_bad_fault_spec_names_the_part_and_the_choices(spec: str, message: str
 def test_a_bad_fault_spec_stops_the_scripts_before_any_work(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
-    config_path = tmp_path / "tiny.yaml"
-    config_path.write_text(yaml.safe_dump(TINY))
+    config_path = _config_file(tmp_path)
     monkeypatch.setenv(faults.ENV_VARIABLE, "write:*.pt:1:fsync:explode")
     assert train_script.main(["--config", str(config_path), "--run-dir", str(tmp_path / "run")]) == 2
     assert "error: MEMGYM_FAULT: 'write:*.pt:1:fsync:explode': action 'explode' is invalid" in capsys.readouterr().err
@@ -143,14 +141,7 @@ def test_a_checkpoint_truncated_or_corrupted_anywhere_is_never_loaded(tmp_path: 
 def _killed_after(config, run_dir: Path, updates: int) -> None:
     """Train until ``updates`` updates are done, then die as a killed process would (no checkpoint of its own)."""
     trainer = Trainer(config, run_dir)
-    run_update = trainer.train_update
-
-    def maybe_die() -> dict[str, float]:
-        if trainer.update == updates:
-            raise KeyboardInterrupt
-        return run_update()
-
-    trainer.train_update = maybe_die  # type: ignore[method-assign]
+    kill_after(trainer, updates)
     with pytest.raises(KeyboardInterrupt):
         trainer.train()
 
@@ -264,8 +255,7 @@ def test_a_failed_checkpoint_write_keeps_the_previous_checkpoint_and_stops_clear
 def test_train_script_reports_a_full_disk_without_a_traceback(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
-    config_path = tmp_path / "tiny.yaml"
-    config_path.write_text(yaml.safe_dump(TINY))
+    config_path = _config_file(tmp_path)
     monkeypatch.setenv(faults.ENV_VARIABLE, "write:episodes.csv:1:rename:enospc")
     assert train_script.main(["--config", str(config_path), "--run-dir", str(tmp_path / "run")]) == 1
     error = capsys.readouterr().err
@@ -302,8 +292,7 @@ def test_a_non_finite_loss_or_weight_stops_at_its_update_with_the_last_good_chec
 
 # ----------------------------------------------------------------------------------- real kills, signals
 def _train_command(tmp_path: Path, run_dir: Path, **run: object) -> list[str]:
-    config_path = tmp_path / "tiny.yaml"
-    config_path.write_text(yaml.safe_dump({**TINY, "run": {**TINY["run"], **run}}))
+    config_path = _config_file(tmp_path, **run)
     return [sys.executable, str(ROOT / "scripts" / "train.py"), "--config", str(config_path), "--run-dir", str(run_dir)]
 
 

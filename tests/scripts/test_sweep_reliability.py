@@ -20,26 +20,21 @@ from agents.checkpoint import checkpoint_update, latest_checkpoint
 from agents.preemption import EXIT_PREEMPTED
 from agents.sweep import FINISHED, load_panel, prepare_run, run_lock, run_status, train_run
 from scripts import sweep as sweep_script
+from tests.support.tiny_run import tiny_run, with_run
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = {
-    "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
-    "model": {"memory": "gru", "memory_size": 16, "hidden_size": 16, "vector_encoder_size": 8},
-    "ppo": {"epochs": 1, "minibatches": 1},
-    "run": {
+TINY = tiny_run(
+    {"epochs": 1, "minibatches": 1},
+    {
         "total_steps": 3 * 64,
-        "workers": 4,
-        "worker_steps": 16,
         "torch_threads": 0,  # fixed by the launcher when it creates the run: its share of the cores
-        "progress_bar": False,
         "checkpoint_interval": 0,  # a checkpoint at the end only (and at a pre-emption)
     },
-}
+)
 
 
 def _write(path: Path, seeds: list[int], **run: object) -> Path:
-    base = {**TINY, "run": {**TINY["run"], **run}}
-    path.write_text(yaml.safe_dump({**base, "grid": {"run.seed": seeds}}, sort_keys=False))
+    path.write_text(yaml.safe_dump({**with_run(TINY, **run), "grid": {"run.seed": seeds}}, sort_keys=False))
     return path
 
 

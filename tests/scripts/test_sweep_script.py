@@ -23,23 +23,14 @@ from agents.evaluation import read_records
 from agents.slurm import wait_for_jobs
 from agents.sweep import FINISHED, load_panel, run_status
 from scripts import sweep as sweep_script
+from tests.support.tiny_run import tiny_run, with_run
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = {
-    "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
-    "model": {"memory": "gru", "memory_size": 16, "hidden_size": 16, "vector_encoder_size": 8},
-    "ppo": {"epochs": 1, "minibatches": 1},
-    "run": {
-        "total_steps": 3 * 64,
-        "workers": 4,
-        "worker_steps": 16,
-        "torch_threads": 1,
-        "progress_bar": False,
-        "checkpoint_interval": 1,
-        "keep_checkpoints": 1,
-    },
-    "eval": {"interval": 2, "seeds": [100_000, 100_002], "repetitions": 2},
-}
+TINY = tiny_run(
+    {"epochs": 1, "minibatches": 1},
+    {"total_steps": 3 * 64, "torch_threads": 1, "checkpoint_interval": 1, "keep_checkpoints": 1},
+    {"interval": 2, "seeds": [100_000, 100_002], "repetitions": 2},
+)
 
 
 def _write(path: Path, grid: dict, base: dict = TINY) -> Path:
@@ -191,7 +182,7 @@ def test_slurm_launcher_through_submitit_requeues_and_resumes(tmp_path: Path) ->
     from agents.slurm import launch_slurm
 
     grid = {"method": {"gru": {}}, "run.seed": [0], "slurm": {"time": "5", "cpus_per_job": 1}}
-    config = _write(tmp_path / "cluster.yaml", grid, {**TINY, "run": {**TINY["run"], "total_steps": 24 * 64}})
+    config = _write(tmp_path / "cluster.yaml", grid, with_run(TINY, total_steps=24 * 64))
     panel = load_panel(config, root=tmp_path / "runs")
     ((run, job),) = launch_slurm(panel, cluster="local", echo=lambda _: None)
     deadline = time.monotonic() + 120
