@@ -11,8 +11,8 @@ memory is one new file here and one registry entry:
 * ``step(features, state, episode_step)``: one decision of B slots; ``episode_step`` (B,) counts the decisions
   since each slot's episode start (a window memory reads how much of its window is the episode's from it).
 * ``acting_cache(state, episode_step)`` (optional, None by default): what acting may keep from step to step instead
-  of recomputing it from the state (a transformer's keys and values); ``step`` then takes it as ``cache`` and
-  advances it in place. The actor rebuilds it when the weights change or the state is replaced.
+  of recomputing it from the state (a transformer's window, as its attention reads it); ``step`` then takes it as
+  ``cache`` and advances it in place. The actor rebuilds it when the weights change or the state is replaced.
 * **Records** (``record_shape``, :meth:`~agents.memory.base.Memory.record`): what the buffer keeps of every step.
   A recurrent memory keeps the state fed into the step; a transformer the step's layer inputs.
 * ``history``: ``None`` when the training pass needs the record at each sequence start only (truncated BPTT from

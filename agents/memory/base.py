@@ -34,7 +34,7 @@ class Memory(nn.Module):
 
     def acting_cache(self, state: Tensor, episode_step: Tensor | None = None) -> Any:
         """What acting may keep from one step to the next instead of recomputing it from the state at every step
-        (a transformer's keys and values of its window), built from ``state`` (B, ...) at ``episode_step`` (B,), or
+        (a transformer's window, as its attention reads it), built from ``state`` (B, ...) at ``episode_step`` (B,), or
         None (the default): nothing. A memory that returns one takes it as :meth:`step`'s ``cache`` and advances it
         in place, with the outputs and next state of a step without it. The actor keeps it while the memory's
         parameters are unchanged and every slot steps, or is cleared to an episode start (which must read nothing

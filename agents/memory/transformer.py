@@ -16,15 +16,18 @@ per sequence, the records of the ``memory_length`` steps before its start and of
 dim), and attends with a banded causal mask: every query recomputed, every key and value the cached record (the
 authors' "one new hidden state per step", in training as well). No per-step copy of a window is ever made.
 
-Cost. Acting keeps the window's keys and values (:class:`KeyValueCache`, built once from the state when the actor
-starts acting with new weights or a new state, then extended in place by one entry per step), so a decision projects
-one entry per block, not the whole window; the state, the records and a checkpoint stay the layer inputs, so a
-resume rebuilds the same cache; the window moves on without being copied (:func:`shift_window`), and a slot
-that starts an episode is cleared in place. What is left of a decision is bound by reading memory: the weights
-(17.6 MB at 3 x 384 with the MM Grid CNN's 3,136 inputs, fp32) and the window's keys and values (17.5 MB at 16
-slots x 119), every step. The training pass runs the single-step layers on the real steps only (the padded
-(S, P) layout exists for the attention alone) and projects keys and values only for the records some query reads
-(a sequence that starts its episode reads none of the window before it).
+Cost. Acting keeps, per block, what its key and value projections take of the window's entries (the cached inputs,
+layer-normed with ``pre``; :class:`WindowCache`, built once from the state when the actor starts acting with new
+weights or a new state, then extended in place by one entry per step), and attends without projecting them: the
+key projection moves to the query and the value projection after the weighted sum (:meth:`Block.attend_window`), so
+a decision reads the window's inputs (8.8 MB at 16 slots x 119 x 3 x 384, fp32) where keys and values would be
+twice that, and projects nothing per entry. The state, the records and a checkpoint stay the layer inputs, so a
+resume rebuilds the same cache; the window moves on without being copied (:func:`shift_window`), and a slot that
+starts an episode is cleared in place. What is left of a decision is bound by reading memory: the weights (17.6 MB at
+3 x 384 with the MM Grid CNN's 3,136 inputs, fp32) and the window, every step. The training pass runs the
+single-step layers on the real steps only (the padded (S, P) layout exists for the attention alone) and projects
+keys and values only for the records some query reads (a sequence that starts its episode reads none of the window
+before it): there, P queries share every projected key, so projecting is the cheaper side.
 
 Scaling is 1/sqrt(dim / heads), the scaled dot product's own: it keeps each head's logits at unit variance whatever
 the number of heads (the authors' 1/sqrt(dim) shrinks them by sqrt(heads), a leftover of the shared-projection
@@ -118,17 +121,28 @@ def _is_view(window: Tensor, buffer: Tensor, start: int) -> bool:
 
 
 @dataclass
-class KeyValueCache:
+class WindowCache:
     """What acting reads of the slots' windows, built from their states by :meth:`TransformerXL.acting_cache` and
-    advanced in place by every :meth:`TransformerXL.step`: per block, the keys and values (B, heads, memory_length,
-    head_dim) of the window's entries in a ring whose oldest entry sits at ``oldest`` (the step writes its own over
-    it), and the relative encoding's projected distances (heads, head_dim, memory_length). Valid while the parameters
-    are the ones it was built with; a slot cleared to an episode start needs no rebuild (it reads no entry)."""
+    advanced in place by every :meth:`TransformerXL.step`: per block, the inputs of its key and value projections
+    (:meth:`Block.window_inputs`) at the window's entries, (B, G, memory_length, c) (G = 1, c = dim; with shared head
+    projections G = heads, c = head_dim), in a ring whose oldest entry sits at ``oldest`` (the step writes its own
+    over it), and the relative encoding's projected distances (heads, head_dim, 2 memory_length: the table twice, so
+    that the columns in ring order are a slice of it, see :meth:`relative`). Valid while the
+    parameters are the ones it was built with; a slot cleared to an episode start needs no rebuild (it reads no
+    entry)."""
 
-    keys: list[Tensor]
-    values: list[Tensor]
-    relative: list[Tensor | None]
+    inputs: list[Tensor]
+    tables: list[Tensor | None]
     oldest: int = 0
+
+    def relative(self, layer: int) -> Tensor | None:
+        """Block ``layer``'s projected distances (heads, head_dim, memory_length) with their columns in ring order
+        (the oldest entry's, at ``oldest``, is the farthest distance's): a view, where a roll would copy."""
+        table = self.tables[layer]
+        if table is None:
+            return None
+        length = table.shape[-1] // 2
+        return table[..., length - self.oldest : 2 * length - self.oldest]
 
 
 class Block(nn.Module):
@@ -160,10 +174,20 @@ class Block(nn.Module):
             return tuple(layer(x) for layer in layers)
         return tuple(layer(x).unflatten(-1, (self.heads, self.head_dim)) for layer in layers)
 
+    def window_inputs(self, memory: Tensor) -> Tensor:
+        """What the key and value projections take of cached inputs (..., dim): the inputs, layer-normed with
+        ``pre``."""
+        return self.norms[1](memory) if self.norm == "pre" else memory
+
     def keys_values(self, memory: Tensor) -> tuple[Tensor, Tensor]:
         """Keys and values (..., heads, head_dim) of cached inputs (..., dim)."""
-        keys, values = self._project(self.norms[1](memory) if self.norm == "pre" else memory, (self.key, self.value))
+        keys, values = self._project(self.window_inputs(memory), (self.key, self.value))
         return keys, values
+
+    def queries(self, h: Tensor) -> Tensor:
+        """The queries (N, heads, head_dim) of the blocks' inputs ``h`` (N, dim)."""
+        (q,) = self._project(self.norms[0](h) if self.norm == "pre" else h, (self.query,))
+        return q
 
     def relative_table(self, distances: Tensor | None) -> Tensor | None:
         """The relative encoding's projected distances (heads, head_dim, M) from their sinusoids (M, dim) of the
@@ -199,24 +223,41 @@ class Block(nn.Module):
         weights = torch.softmax(logits, dim=-1) * mask  # an empty window: all zeros, not uniform over padding
         return weights.to(v.dtype) @ v
 
-    def forward(
-        self,
-        h: Tensor,
-        keys_values: tuple[Tensor, Tensor],
-        valid: Tensor,
-        rows: Tensor | None,
-        table: Tensor | None,
-    ) -> Tensor:
-        """The block on the queries' inputs ``h`` (N, dim), the real steps of S sequences of P positions (``rows``:
-        their flat positions in S * P, None when every position is one, P = 1), attending over ``keys_values``."""
-        s, p = valid.shape[:2]
+    def attend_window(self, q: Tensor, window: Tensor, valid: Tensor, table: Tensor | None) -> Tensor:
+        """:meth:`attend` of single queries (B, heads, head_dim) over a window of key and value inputs (B, G, M, c)
+        (:class:`WindowCache`) where ``valid`` (B, M); returns (B, dim). The key projection moves to the query side
+        (q . (W_k u + b_k) = (W_k^T q) . u + q . b_k, whose last term is the same for every key, so the softmax
+        drops it) and the value projection after the weighted sum (sum_j a_j (W_v u_j + b_v) = W_v sum_j a_j u_j +
+        b_v sum_j a_j), so acting reads the window's inputs twice instead of its keys and its values, and keeps half
+        the bytes per step (8.8 MB against 17.5 at 16 slots x 119 x 3 x 384, fp32: with the weights, under the CPU's
+        last-level cache)."""
+        b, heads, head_dim = q.shape
+        groups = window.shape[1]
+        if self.shared:  # every head's slice through the same (head_dim, head_dim) projections
+            folded = q @ self.key.weight  # (B, H, hd)
+        else:  # head h through its rows of W_k: (H, B, hd) @ (H, hd, dim)
+            folded = (q.transpose(0, 1) @ self.key.weight.view(heads, head_dim, -1)).transpose(0, 1)
+        # window @ folded^T, not folded @ window^T: a product over the window as stored reads it twice as fast
+        logits = (window @ folded.reshape(b, groups, heads // groups, -1).mT).mT.reshape(b, heads, -1)
+        if table is not None:  # (H, B, hd) @ (H, hd, M)
+            logits = logits + (q.transpose(0, 1) @ table).transpose(0, 1)
+        logits = logits.float() * (1.0 / math.sqrt(self.head_dim))
+        mask = valid.unsqueeze(1)
+        weights = torch.softmax(logits.masked_fill(~mask, torch.finfo(logits.dtype).min), dim=-1) * mask
+        mixed = weights.to(window.dtype).view(b, groups, heads // groups, -1) @ window  # (B, G, H / G, c)
+        if self.shared:
+            values = mixed.view(b, heads, head_dim) @ self.value.weight.t()
+        else:  # (H, B, dim) @ (H, dim, hd)
+            values = mixed.view(b, heads, -1).transpose(0, 1) @ self.value.weight.view(heads, head_dim, -1).mT
+            values = values.transpose(0, 1)
+        bias = self.value.bias.view(-1, head_dim)  # (H, hd), or (1, hd) shared
+        return (values + weights.sum(-1, keepdim=True).to(values.dtype) * bias).reshape(b, -1)
+
+    def update(self, h: Tensor, attended: Tensor) -> Tensor:
+        """The rest of the block on its inputs ``h`` (N, dim) given their attention outputs (N, dim), heads side by
+        side: the output projection, the residual (or gate), the feed-forward layer and its residual (or gate)."""
         pre, post = self.norm == "pre", self.norm == "post"
-        (q,) = self._project(self.norms[0](h) if pre else h, (self.query,))  # (N, H, hd)
-        if rows is not None:  # the sequences' padded layout, only for the attention itself
-            q = q.new_zeros((s * p, *q.shape[1:])).index_copy(0, rows, q)
-        attended = self.attend(q.view(s, p, *q.shape[1:]).transpose(1, 2), *keys_values, valid, table)
-        attended = attended.transpose(1, 2).reshape(s * p, -1)
-        attended = self.out(attended if rows is None else attended.index_select(0, rows))
+        attended = self.out(attended)
         h = self.gates[0](h, F.relu(attended)) if self.gates is not None else h + attended
         if post:
             h = self.norms[0](h)
@@ -255,28 +296,29 @@ class TransformerXL(Memory):
             return None
         return self.positions[key_step.clamp(0, self.config.positional_size - 1)].to(dtype)
 
-    def acting_cache(self, state: Tensor, episode_step: Tensor | None = None) -> KeyValueCache:
-        """The keys and values of the windows ``state`` (B, memory_length, layers, dim) at ``episode_step`` (B,)
-        (see :class:`KeyValueCache`): one projection of each window, where a step without it projects one entry."""
+    def acting_cache(self, state: Tensor, episode_step: Tensor | None = None) -> WindowCache:
+        """The key and value inputs of the windows ``state`` (B, memory_length, layers, dim) at ``episode_step`` (B,)
+        (see :class:`WindowCache`): built once per state and weights, then advanced one entry per step."""
         if episode_step is None:
             raise ValueError("the trxl memory needs each slot's episode_step (decisions since its episode start)")
         dtype = compute_dtype(self.embed[0].weight)
         length = state.shape[1]
         key_step = episode_step.unsqueeze(1) - length + torch.arange(length, device=state.device)
         position = self._positions(key_step, dtype)
-        keys, values = [], []
+        inputs = []
         for layer, block in enumerate(self.blocks):
             memory = state[:, :, layer].to(dtype)
-            k, v = block.keys_values(memory if position is None else memory + position)  # (B, M, H, hd)
-            keys.append(k.transpose(1, 2).contiguous())
-            values.append(v.transpose(1, 2).contiguous())
-        return KeyValueCache(keys, values, [block.relative_table(self.distances) for block in self.blocks])
+            window = block.window_inputs(memory if position is None else memory + position)  # (B, M, dim)
+            groups = block.heads if block.shared else 1
+            inputs.append(window.unflatten(-1, (groups, -1)).transpose(1, 2).contiguous())  # (B, G, M, c)
+        tables = (block.relative_table(self.distances) for block in self.blocks)
+        return WindowCache(inputs, [None if table is None else torch.cat((table, table), dim=-1) for table in tables])
 
     def step(
-        self, features: Tensor, state: Tensor, episode_step: Tensor | None = None, cache: KeyValueCache | None = None
+        self, features: Tensor, state: Tensor, episode_step: Tensor | None = None, cache: WindowCache | None = None
     ) -> tuple[Tensor, Tensor]:
         """One step; ``cache`` (advanced in place) is :meth:`acting_cache` of an earlier state advanced by every
-        step since, None: built from ``state`` here (the same outputs, up to the rounding of the projections)."""
+        step since, None: built from ``state`` here."""
         if episode_step is None:
             raise ValueError("the trxl memory needs each slot's episode_step (decisions since its episode start)")
         if self.encoding in ("absolute", "learned"):
@@ -293,18 +335,17 @@ class TransformerXL(Memory):
         h = self.embed(features)
         age = (torch.arange(length, device=h.device) - cache.oldest) % length  # ring entry -> 0 for the oldest
         distance = length - age  # steps back from this one: 1..M
-        valid = (distance <= episode_step.clamp(max=length).unsqueeze(1)).unsqueeze(1)  # (B, 1, M)
+        valid = distance <= episode_step.clamp(max=length).unsqueeze(1)  # (B, M)
         position = self._positions(episode_step, h.dtype)  # of the step's own entry
         inputs = []
         for layer, block in enumerate(self.blocks):
             inputs.append(h)
             entry = h.to(self.state_dtype).to(h.dtype)  # as the state keeps it, so the training pass reads the same
-            new_key, new_value = block.keys_values(entry if position is None else entry + position)
-            table = cache.relative[layer]  # its columns follow the ring: the oldest entry's is the farthest's
-            table = None if table is None else table.roll(cache.oldest, dims=-1)
-            h = block(h, (cache.keys[layer], cache.values[layer]), valid, None, table)
-            cache.keys[layer][:, :, cache.oldest] = new_key  # after the attention: a step never attends to itself
-            cache.values[layer][:, :, cache.oldest] = new_value
+            window = cache.inputs[layer]
+            new_entry = block.window_inputs(entry if position is None else entry + position)
+            attended = block.attend_window(block.queries(h), window, valid, cache.relative(layer))
+            h = block.update(h, attended)
+            window[:, :, cache.oldest] = new_entry.view(window.shape[0], window.shape[1], -1)  # after the attention
         cache.oldest = (cache.oldest + 1) % length
         return h, shift_window(state, torch.stack(inputs, dim=1))
 
@@ -338,5 +379,8 @@ class TransformerXL(Memory):
             for projected in block.keys_values(memory if position is None else memory + position):
                 padded = projected.new_zeros((s * k_len, *projected.shape[1:])).index_copy(0, needed, projected)
                 keys_values.append(padded.view(s, k_len, *projected.shape[1:]).transpose(1, 2))
-            h = block(h, tuple(keys_values), valid, rows, block.relative_table(self.distances))
+            q = block.queries(h)  # the real steps' (N, H, hd), padded to the sequences' layout for the attention
+            q = q.new_zeros((s * p, *q.shape[1:])).index_copy(0, rows, q).view(s, p, *q.shape[1:]).transpose(1, 2)
+            attended = block.attend(q, *keys_values, valid, block.relative_table(self.distances))
+            h = block.update(h, attended.transpose(1, 2).reshape(s * p, -1).index_select(0, rows))
         return h

@@ -105,8 +105,8 @@ def test_cached_rollout_outputs_equal_the_training_pass(variant: dict) -> None:
 
 @pytest.mark.parametrize("variant", VARIANTS, ids=lambda v: "-".join(str(x) for x in v.values()))
 def test_a_carried_acting_cache_gives_the_outputs_of_one_built_at_every_step(variant: dict) -> None:
-    """The keys and values projected once per entry and carried in a ring through episode ends (where the cleared
-    slot reads none of them) give what projecting the whole window at every step gives, up to rounding."""
+    """The window's key and value inputs computed once per entry and carried in a ring through episode ends (where
+    the cleared slot reads none of them) give what a cache built from the whole window at every step gives."""
     memory = _memory(**variant)
     terminated, episode_step = _layout()
     features = torch.randn(3, 11, FEATURES, generator=torch.Generator().manual_seed(8))
@@ -152,7 +152,7 @@ def test_the_actor_rebuilds_its_acting_cache_when_the_weights_or_the_state_chang
     actor.advance(actor.decide())
     with torch.no_grad():
         for weight in model.memory.parameters():
-            weight.mul_(0.5)  # new weights (as an update writes them): stale keys and values would show
+            weight.mul_(0.5)  # new weights (as an update writes them): a stale window cache would show
     refresh_copy(model, trainer.model)
     actor.decide()
     assert sum(checked) == 3 * 8 + 4
