@@ -23,8 +23,9 @@ key projection moves to the query and the value projection after the weighted su
 a decision reads the window's inputs (8.8 MB at 16 slots x 119 x 3 x 384, fp32) where keys and values would be
 twice that, and projects nothing per entry. The state, the records and a checkpoint stay the layer inputs, so a
 resume rebuilds the same cache; the window moves on without being copied (:func:`shift_window`), and a slot that
-starts an episode is cleared in place. What is left of a decision is bound by reading memory: the weights (17.6 MB at
-3 x 384 with the MM Grid CNN's 3,136 inputs, fp32) and the window, every step. The training pass runs the
+starts an episode is cleared in place. What is left of a decision is reading the weights (17.6 MB at 3 x 384 with
+the MM Grid CNN's 3,136 inputs, fp32) and the window at every step, in products of 16 rows too small to reach the
+memory's bandwidth (docs/baselines.md, "Speed"). The training pass runs the
 single-step layers on the real steps only (the padded (S, P) layout exists for the attention alone) and projects
 keys and values only for the records some query reads (a sequence that starts its episode reads none of the window
 before it): there, P queries share every projected key, so projecting is the cheaper side.
