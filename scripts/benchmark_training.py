@@ -15,6 +15,10 @@
   epochs (inputs gathered beforehand, frame stacks rebuilt, no rollout, no optimizer): batch size / time. End to
   end can only approach it; end to end / bound says what the rest of the pipeline (rollout, GAE, gathering and
   stacking, optimizer) costs, so a method's larger network and its machinery are told apart;
+* acting, per method: the share of the time in the policy's forward passes while it acts (every decision of the
+  rollout, 16 rows at a time by default), and end to end over the network's whole time (the bound's training passes
+  plus those acting passes): what the environment, the buffer, GAE, gathering and the optimizer cost. The bound
+  leaves acting out, so end to end / bound is also below 1 by acting at small batches, which no pipeline removes;
 * memory, for the Transformer-XL methods (``trxl``, ``gtrxl``: 3 blocks x 384, 4 heads, a window of 119): the bytes
   per step of the buffer's memory records (each step's layer inputs, stored once, and the windows carried in), and
   the measurement runs on CUDA as well (``--device cuda``: a few minutes), where the peak is torch's allocator's;
@@ -188,8 +192,23 @@ def measure_method(args: argparse.Namespace, method: str) -> dict[str, float]:
                 return out
 
             trainer.helm.step = timed_step  # type: ignore[method-assign]
+        acting_seconds = [0.0]
+        acting_step = trainer.rollout_model.step
+        synchronize = config.run.device.startswith("cuda")
+
+        def timed_acting_step(*a: object, **kw: object) -> object:
+            started = time.perf_counter()
+            out = acting_step(*a, **kw)
+            if synchronize:  # the kernels queued must have run (the decision syncs for its actions anyway)
+                import torch
+
+                torch.cuda.synchronize()
+            acting_seconds[0] += time.perf_counter() - started
+            return out
+
+        trainer.rollout_model.step = timed_acting_step  # type: ignore[method-assign]
         trainer.train_update()  # warm-up: allocations, oneDNN kernel selection
-        helm_seconds[0] = 0.0
+        helm_seconds[0] = acting_seconds[0] = 0.0
         started = time.perf_counter()
         rollout_seconds = 0.0
         for _ in range(args.updates):
@@ -200,6 +219,8 @@ def measure_method(args: argparse.Namespace, method: str) -> dict[str, float]:
             "end_to_end": args.updates * config.batch_size / seconds,
             "rollout_share": rollout_seconds / seconds,
             "helm_share": helm_seconds[0] / seconds,
+            "acting_share": acting_seconds[0] / seconds,
+            "acting_seconds_per_update": acting_seconds[0] / args.updates,
             "parameters": float(sum(p.numel() for p in trainer.model.parameters())),
             "bytes_per_step": float(trainer.buffer.bytes_per_step),
             "memory_bytes_per_step": float(trainer.buffer.memory_bytes_per_step),
@@ -315,8 +336,12 @@ def main(argv: list[str] | None = None) -> int:
             for reference in ("ppo", "gru"):
                 if reference in per_method and reference != method:
                     row[f"over_{reference}"] = row["end_to_end"] / per_method[reference]["end_to_end"]
+        batch = args.workers * args.worker_steps
         for row in per_method.values():  # below 1 by what the rollout, GAE, gathering and optimizer add
             row["end_to_end_over_bound"] = row["end_to_end"] / row["bound"]
+            # the network's whole time per update: the bound's training passes and the acting passes
+            network_seconds = batch / row["bound"] + row["acting_seconds_per_update"]
+            row["end_to_end_over_network"] = row["end_to_end"] * network_seconds / batch
         sb3_values = [r["sb3"] for r in rounds if "sb3" in r]
         sb3_rate = how(sb3_values) if sb3_values else None
         summary[how_name] = {
@@ -354,7 +379,8 @@ def main(argv: list[str] | None = None) -> int:
 
     print(
         f"\n{'method':10s}{'steps/s':>10s}{'best':>10s}{'/ PPO':>8s}{'/ GRU':>8s}"
-        f"{'bound':>8s}{'/ bound':>9s}{'rollout':>9s}{'HELM':>7s}{'peak MiB':>10s}{'memory B/step':>15s}"
+        f"{'bound':>8s}{'/ bound':>9s}{'rollout':>9s}{'acting':>8s}{'/ +acting':>11s}{'HELM':>7s}{'peak MiB':>10s}"
+        f"{'memory B/step':>15s}"
     )
     median, best = summary["median"]["methods"], summary["best"]["methods"]  # type: ignore[index]
     for method in methods:
@@ -362,7 +388,8 @@ def main(argv: list[str] | None = None) -> int:
         ratios = [f"{m[key]:8.2f}" if key in m else f"{'-':>8s}" for key in ("over_ppo", "over_gru")]
         print(
             f"{method:10s}{m['end_to_end']:10.0f}{best[method]['end_to_end']:10.0f}{''.join(ratios)}"
-            f"{m['bound']:8.0f}{m['end_to_end_over_bound']:9.2f}{m['rollout_share']:9.0%}{m['helm_share']:7.0%}"
+            f"{m['bound']:8.0f}{m['end_to_end_over_bound']:9.2f}{m['rollout_share']:9.0%}{m['acting_share']:8.0%}"
+            f"{m['end_to_end_over_network']:11.2f}{m['helm_share']:7.0%}"
             f"{m.get('peak_cuda_mib', m['peak_rss_mib']):10.0f}{m['memory_bytes_per_step']:15,.0f}"
         )
     if summary["median"]["sb3_recurrent_ppo_steps_per_s"]:  # type: ignore[index]

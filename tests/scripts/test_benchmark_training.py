@@ -30,6 +30,10 @@ def test_benchmark_writes_a_complete_record(tmp_path: Path) -> None:
             assert row["end_to_end"] > 0 and 0 < row["rollout_share"] < 1 and 50 < row["peak_rss_mib"] < 1500
             assert row["helm_share"] == 0.0
             assert row["bound"] > 0 and row["end_to_end_over_bound"] == row["end_to_end"] / row["bound"]
+            assert 0 < row["acting_share"] < row["rollout_share"]  # the policy's passes, inside the rollout
+            network = 32 / row["bound"] + row["acting_seconds_per_update"]  # training passes + acting passes
+            assert row["end_to_end_over_network"] == pytest.approx(row["end_to_end"] * network / 32)
+            assert row["end_to_end_over_network"] > row["end_to_end_over_bound"]
         assert methods["stack4"]["over_ppo"] == methods["stack4"]["end_to_end"] / methods["ppo"]["end_to_end"]
         assert methods["stack4"]["bytes_per_step"] > methods["ppo"]["bytes_per_step"]
         assert summary["sb3_recurrent_ppo_steps_per_s"] is None
