@@ -6,6 +6,7 @@
     python scripts/benchmark_training.py --env MortarMayhem-Grid-v0 --precision fp32 --methods gru,trxl,gtrxl --sb3 no
         [--threads 1 --out results/benchmarks/training_trxl.json]  (--threads 0: training_trxl_2threads.json)
     python scripts/benchmark_training.py --precision fp32 --methods gru,lru,ffm,mamba --sb3 no
+        [--threads 0 --updates 2 --repeats 3 --out results/benchmarks/training_scan_memories_2threads.json]
 
 * end to end, per method (configs/mortar_mayhem_b_grid/<method>.yaml at the benchmark's batch): ``train_update()``
   (rollout in the batched env, GAE, sequence splitting, PPO epochs with optimizer steps), env steps per second, with
