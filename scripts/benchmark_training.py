@@ -48,8 +48,9 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
@@ -176,38 +177,36 @@ def sb3_throughput(model: object, args: argparse.Namespace) -> float:
     return batch * args.updates / (time.perf_counter() - started)
 
 
+def timed(function: Callable[..., Any], seconds: list[float], synchronize: bool = False) -> Callable[..., Any]:
+    """``function``, adding the seconds of each call to ``seconds[0]`` (with ``synchronize``, until the CUDA
+    kernels it queued have run: a decision waits for them anyway, for its actions)."""
+
+    def timed_call(*a: object, **kw: object) -> object:
+        started = time.perf_counter()
+        out = function(*a, **kw)
+        if synchronize:
+            import torch
+
+            torch.cuda.synchronize()
+        seconds[0] += time.perf_counter() - started
+        return out
+
+    return timed_call
+
+
 def measure_method(args: argparse.Namespace, method: str) -> dict[str, float]:
     """One round of ``method`` in this process: end-to-end steps/s over ``args.updates`` updates after a warm-up, the
     rollout's and the HELM branch's shares of the time, the network bound, and this process's peak memory."""
     config = benchmark_config(args, method)
     with tempfile.TemporaryDirectory() as run_dir:
         trainer = Trainer(config, run_dir)
-        helm_seconds = [0.0]
-        if trainer.helm is not None:  # time the branch's frozen forward passes (all of them run in the rollout)
-            step = trainer.helm.step
-
-            def timed_step(*a: object, **kw: object) -> object:
-                started = time.perf_counter()
-                out = step(*a, **kw)
-                helm_seconds[0] += time.perf_counter() - started
-                return out
-
-            trainer.helm.step = timed_step  # type: ignore[method-assign]
-        acting_seconds = [0.0]
-        acting_step = trainer.rollout_model.step
         synchronize = config.run.device.startswith("cuda")
-
-        def timed_acting_step(*a: object, **kw: object) -> object:
-            started = time.perf_counter()
-            out = acting_step(*a, **kw)
-            if synchronize:  # the kernels queued must have run (the decision syncs for its actions anyway)
-                import torch
-
-                torch.cuda.synchronize()
-            acting_seconds[0] += time.perf_counter() - started
-            return out
-
-        trainer.rollout_model.step = timed_acting_step  # type: ignore[method-assign]
+        helm_seconds, acting_seconds = [0.0], [0.0]
+        if trainer.helm is not None:  # the branch's frozen forward passes (all of them run in the rollout)
+            trainer.helm.step = timed(trainer.helm.step, helm_seconds, synchronize)  # type: ignore[method-assign]
+        trainer.rollout_model.step = timed(  # type: ignore[method-assign]
+            trainer.rollout_model.step, acting_seconds, synchronize
+        )  # the policy's forward passes while acting
         trainer.train_update()  # warm-up: allocations, oneDNN kernel selection
         helm_seconds[0] = acting_seconds[0] = 0.0
         started = time.perf_counter()

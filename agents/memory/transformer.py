@@ -218,11 +218,14 @@ class Block(nn.Module):
         logits = q @ k.transpose(-1, -2)  # (S, H, P, K)
         if table is not None:
             logits = logits + self.relative_logits(q, table, k.shape[-2])
+        return self._weights(logits, valid.unsqueeze(1)).to(v.dtype) @ v
+
+    def _weights(self, logits: Tensor, mask: Tensor) -> Tensor:
+        """Attention weights of raw ``logits`` over the keys (last dim) where ``mask`` (broadcast to them): scaled,
+        softmaxed in float32, zero outside the mask; a query with no valid key gets all zeros (an empty window is
+        not a uniform softmax over padding)."""
         logits = logits.float() * (1.0 / math.sqrt(self.head_dim))
-        mask = valid.unsqueeze(1)
-        logits = logits.masked_fill(~mask, torch.finfo(logits.dtype).min)
-        weights = torch.softmax(logits, dim=-1) * mask  # an empty window: all zeros, not uniform over padding
-        return weights.to(v.dtype) @ v
+        return torch.softmax(logits.masked_fill(~mask, torch.finfo(logits.dtype).min), dim=-1) * mask
 
     def attend_window(self, q: Tensor, window: Tensor, valid: Tensor, table: Tensor | None) -> Tensor:
         """:meth:`attend` of single queries (B, heads, head_dim) over a window of key and value inputs (B, G, M, c)
@@ -242,9 +245,7 @@ class Block(nn.Module):
         logits = (window @ folded.reshape(b, groups, heads // groups, -1).mT).mT.reshape(b, heads, -1)
         if table is not None:  # (H, B, hd) @ (H, hd, M)
             logits = logits + (q.transpose(0, 1) @ table).transpose(0, 1)
-        logits = logits.float() * (1.0 / math.sqrt(self.head_dim))
-        mask = valid.unsqueeze(1)
-        weights = torch.softmax(logits.masked_fill(~mask, torch.finfo(logits.dtype).min), dim=-1) * mask
+        weights = self._weights(logits, valid.unsqueeze(1))  # (B, H, M)
         mixed = weights.to(window.dtype).view(b, groups, heads // groups, -1) @ window  # (B, G, H / G, c)
         if self.shared:
             values = mixed.view(b, heads, head_dim) @ self.value.weight.t()
