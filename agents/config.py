@@ -246,17 +246,36 @@ class MambaConfig:
 
 
 @dataclass
+class Mamba2Config:
+    """A state-space memory with one decay per head (``model.memory: mamba2``, agents/memory/mamba2.py; Mamba-2's
+    block): ``model.memory_layers`` residual blocks of width ``model.memory_size``, trained through matrix products
+    over chunks of steps."""
+
+    state_size: int = param(
+        16, "SSM states per head channel (N; the buffer keeps expand x memory_size x N floats per step)", low=1
+    )
+    expand: int = param(2, "inner width = expand x memory_size", low=1)
+    head_dim: int = param(64, "channels per head (one decay per head); must divide the inner width", low=1)
+    conv_size: int = param(4, "steps of the causal depthwise convolution over x, B and C (1: none)", low=1)
+    chunk_size: int = param(64, "steps per chunk of the training pass (its Q x Q products)", low=1)
+    dt_min: float = param(0.001, "smallest initial step size", low=1e-6)
+    dt_max: float = param(0.1, "largest initial step size", low=1e-6)
+
+
+@dataclass
 class ModelConfig:
     """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
 
     encoder: str = param("nature_cnn", "observation encoder (agents.models.ENCODERS): nature_cnn (images) or mlp")
     memory: str = param(
         "gru",
-        "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm, trxl, lru, ffm, mamba, or a class of your own "
-        "by import path, 'package.module:ClassName' (docs/memory.md)",
+        "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm, trxl, lru, ffm, mamba, mamba2, or a class of "
+        "your own by import path, 'package.module:ClassName' (docs/memory.md)",
     )
-    memory_size: int = param(512, "hidden units of the recurrent layer (the width of lru, ffm and mamba)", low=1)
-    memory_layers: int = param(1, "stacked recurrent layers (blocks of lru, ffm and mamba)", low=1)
+    memory_size: int = param(
+        512, "hidden units of the recurrent layer (the width of lru, ffm, mamba and mamba2)", low=1
+    )
+    memory_layers: int = param(1, "stacked recurrent layers (blocks of lru, ffm, mamba and mamba2)", low=1)
     memory_options: dict[str, Any] = param(
         {}, "keyword arguments of a memory given by import path (its own hyperparameters)"
     )
@@ -278,6 +297,7 @@ class ModelConfig:
     lru: LruConfig = param(LruConfig(), "the Linear Recurrent Unit (used with memory: lru)")
     ffm: FfmConfig = param(FfmConfig(), "Fast and Forgetful Memory (used with memory: ffm)")
     mamba: MambaConfig = param(MambaConfig(), "the selective state-space memory (used with memory: mamba)")
+    mamba2: Mamba2Config = param(Mamba2Config(), "the state-space memory with a decay per head (memory: mamba2)")
 
 
 @dataclass
@@ -724,6 +744,12 @@ def _check_block(block: Any, prefix: str) -> None:
                 raise ConfigError(f"{prefix}.memory={block.memory!r}: {err}") from err
         else:
             _choice(f"{prefix}.memory", block.memory, tuple(MEMORY_MODULES))
+        inner = block.mamba2.expand * block.memory_size
+        if block.memory == "mamba2" and inner % block.mamba2.head_dim:
+            raise ConfigError(
+                f"{prefix}.mamba2.head_dim={block.mamba2.head_dim} is invalid: expected a divisor of the inner width "
+                f"{prefix}.mamba2.expand x {prefix}.memory_size = {inner}"
+            )
         if block.memory_options and ":" not in block.memory:
             raise ConfigError(
                 f"{prefix}.memory_options={block.memory_options!r} is only for a memory given by import path; "
@@ -732,7 +758,7 @@ def _check_block(block: Any, prefix: str) -> None:
     elif isinstance(block, LruConfig):
         if block.r_min > block.r_max:
             raise ConfigError(f"{prefix}.r_min={block.r_min} is invalid: expected <= {prefix}.r_max={block.r_max}")
-    elif isinstance(block, MambaConfig):
+    elif isinstance(block, (MambaConfig, Mamba2Config)):
         if block.dt_min > block.dt_max:
             raise ConfigError(f"{prefix}.dt_min={block.dt_min} is invalid: expected <= {prefix}.dt_max={block.dt_max}")
     elif isinstance(block, HelmConfig):

@@ -59,11 +59,11 @@ METHOD_COLORS = {  # Okabe-Ito, colour-blind safe; fixed per method in every fig
     "lru": "#332288",  # Paul Tol's muted indigo
     "ffm": "#117733",  # green
     "mamba": "#882255",  # wine
+    "mamba2": "#aa4499",  # Paul Tol's muted purple
 }
 SPARE_COLORS = (  # for other methods, in this order: the rest of Paul Tol's muted scheme, then Okabe-Ito's yellow
     "#44aa99",
     "#999933",
-    "#aa4499",
     "#88ccee",
     "#cc6677",
     "#ddcc77",
@@ -82,6 +82,7 @@ METHOD_LABELS = {  # the paper's names of the agents, keyed by the method names 
     "lru": "LRU-PPO",
     "ffm": "FFM-PPO",
     "mamba": "Mamba-PPO",
+    "mamba2": "Mamba2-PPO",
 }
 PART_LABELS = {"gru": "GRU", "lstm": "LSTM", "helm": "HELM"}  # parts of derived names such as gru-stack4
 STEPS_LABEL = "Environment steps (millions)"

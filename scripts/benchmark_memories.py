@@ -1,8 +1,8 @@
 """The memory modules alone: forward + backward of the training pass over S sequences of L steps, per memory and L.
 
-    python scripts/benchmark_memories.py [--memories gru,lru,ffm,mamba] [--lengths 64,128,...,4096] [--sequences 16]
-        [--width 128] [--repeats 3] [--threads 0] [--device cpu|cuda] [--out results/benchmarks/memories.json]
-        [--plot results/benchmarks/memories.png]
+    python scripts/benchmark_memories.py [--memories gru,lru,ffm,mamba,mamba2] [--lengths 64,128,...,4096]
+        [--sequences 16] [--width 128] [--repeats 3] [--threads 0] [--device cpu|cuda]
+        [--out results/benchmarks/memories.json] [--plot results/benchmarks/memories.png]
 
 Each memory is built as the trainer builds it (``model.memory`` at ``model.memory_size`` = width, one layer, its
 block's defaults), fed random features of that width for S full sequences of L steps from zero start states (the
@@ -18,6 +18,7 @@ The table goes to ``runs/benchmarks/memories.json`` (git-ignored) unless ``--out
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -31,7 +32,7 @@ from agents.config import ModelConfig  # noqa: E402
 from agents.io import SCRATCH, ResultFile, add_out_argument, atomic_write_bytes, json_table, provenance  # noqa: E402
 from agents.memory import build_memory  # noqa: E402
 
-MEMORIES = ("gru", "lru", "ffm", "mamba")
+MEMORIES = ("gru", "lru", "ffm", "mamba", "mamba2")
 LENGTHS = (64, 128, 256, 512, 1024, 2048, 4096)
 DEFAULT_OUT = SCRATCH / "benchmarks" / "memories.json"
 
@@ -136,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     load: dict[str, float] = {}
     for memory_name in memories:
         config = ModelConfig(memory=memory_name, memory_size=args.width, memory_layers=1)
+        # Mamba-2's heads of 64 channels at width >= 32; fewer channels where 64 does not divide the inner width
+        config.mamba2.head_dim = math.gcd(config.mamba2.head_dim, config.mamba2.expand * args.width)
         memory = build_memory(config, args.width).to(args.device)
         milliseconds[memory_name] = {}
         for length in lengths:

@@ -67,7 +67,7 @@ from agents.trainer import Trainer  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"
 METHODS = ("gru", "ppo", "stack4", "stack16", "helm")  # the full table
-EXTRA_METHODS = ("trxl", "gtrxl", "lru", "ffm", "mamba")  # measured on request (--methods), beside GRU-PPO
+EXTRA_METHODS = ("trxl", "gtrxl", "lru", "ffm", "mamba", "mamba2")  # measured on request (--methods), beside GRU-PPO
 DEFAULT_OUT = SCRATCH / "benchmarks" / "training.json"
 
 

@@ -25,7 +25,9 @@ memory is one new file here and one registry entry:
 
 Families: :mod:`agents.memory.recurrent` (``none``, ``gru``, ``lstm``), :mod:`agents.memory.transformer` (``trxl``),
 and the linear recurrences on the shared parallel scan (:mod:`agents.memory.scan`): :mod:`agents.memory.lru`
-(``lru``), :mod:`agents.memory.ffm` (``ffm``), :mod:`agents.memory.mamba` (``mamba``).
+(``lru``), :mod:`agents.memory.ffm` (``ffm``), :mod:`agents.memory.mamba` (``mamba``), :mod:`agents.memory.mamba2`
+(``mamba2``: one decay per head, so its training pass is matrix products over chunks and the shared scan runs over
+the chunk boundaries only).
 
 A memory of the user's own needs no edit here: ``model.memory: "package.module:ClassName"`` imports a
 :class:`Memory` subclass, built as ``ClassName(input_size, model_config, **model.memory_options)``
@@ -42,6 +44,7 @@ from agents.memory.base import Memory
 from agents.memory.ffm import FFM
 from agents.memory.lru import LRU
 from agents.memory.mamba import Mamba
+from agents.memory.mamba2 import Mamba2
 from agents.memory.recurrent import NoMemory, RecurrentMemory
 from agents.memory.transformer import TransformerXL
 
@@ -54,6 +57,7 @@ MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], Memory]] = {
     "lru": lambda config, input_size: LRU(config.lru, input_size, config.memory_size, config.memory_layers),
     "ffm": lambda config, input_size: FFM(config.ffm, input_size, config.memory_size, config.memory_layers),
     "mamba": lambda config, input_size: Mamba(config.mamba, input_size, config.memory_size, config.memory_layers),
+    "mamba2": lambda config, input_size: Mamba2(config.mamba2, input_size, config.memory_size, config.memory_layers),
 }
 
 
@@ -90,6 +94,7 @@ __all__ = [
     "LRU",
     "MEMORY_MODULES",
     "Mamba",
+    "Mamba2",
     "Memory",
     "NoMemory",
     "RecurrentMemory",

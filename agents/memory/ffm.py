@@ -19,7 +19,7 @@ from torch import Tensor, nn
 
 from agents.config import FfmConfig
 from agents.layers import orthogonal
-from agents.memory.scan import ScanMemory, complex_dtype, linear_scan, widen
+from agents.memory.scan import Layout, ScanMemory, complex_dtype, linear_scan, widen
 
 
 class FFMBlock(nn.Module):
@@ -42,19 +42,19 @@ class FFMBlock(nn.Module):
         """gamma (trace_size, context_size), complex, |gamma| <= 1."""
         return torch.exp(torch.complex(-self.alpha.abs(), self.omega))
 
-    def forward(self, x: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
-        u = self.norm(x)
+    def forward(self, x: Tensor, state: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
+        u = self.norm(x)  # (N, dim)
         value, gate = widen(self.project(u)).chunk(2, dim=-1)
-        inputs = (value * torch.sigmoid(gate)).unsqueeze(-1).expand(*value.shape, self.shape[1])  # (S, T, m, c)
+        gated = layout.pad(value * torch.sigmoid(gate))  # (S, P, m)
+        inputs = gated.unsqueeze(-1).expand(*gated.shape, self.shape[1])  # (S, P, m, c)
         start = torch.view_as_complex(widen(state).reshape(-1, *self.shape, 2).contiguous())
         dtype = complex_dtype(value.dtype)
         traces = linear_scan(self.decay().to(dtype).view(1, 1, *self.shape), inputs.to(dtype), start)
-        s, t = traces.shape[:2]
-        z = self.mix(torch.view_as_real(traces).reshape(s, t, self.state_size).to(x.dtype))
+        traces = torch.view_as_real(traces)  # (S, P, m, c, 2)
+        z = self.mix(layout.unpad(traces).flatten(1).to(x.dtype))
         skip, out_gate = self.skip_gate(u).chunk(2, dim=-1)
         out_gate = torch.sigmoid(out_gate)
-        final = torch.view_as_real(traces[:, -1]).reshape(-1, self.state_size)
-        return x + z * out_gate + skip * (1 - out_gate), final
+        return x + z * out_gate + skip * (1 - out_gate), traces[:, -1].reshape(-1, self.state_size)
 
 
 class FFM(ScanMemory):

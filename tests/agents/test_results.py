@@ -371,14 +371,14 @@ def test_task_names_and_digests_are_the_same_in_another_process() -> None:
 
 
 def test_the_seeds_of_a_sweep_cell_share_a_digest() -> None:
-    """configs/cpu/mm_grid_1.yaml: 9 methods x 3 seeds; the seeds of one cell agree, the cells differ, and the
+    """configs/cpu/mm_grid_1.yaml: 10 methods x 3 seeds; the seeds of one cell agree, the cells differ, and the
     committed runs' saved configs (torch threads set by the sweep) give their cell's digest."""
     panel = load_panel(ROOT / "configs" / "cpu" / "mm_grid_1.yaml", root=ROOT / "results" / "cpu")
     cells = defaultdict(set)
     for run in panel.runs:
         cells[(run.config.method, run.config.task)].add(results.config_digest(run.config))
-    assert len(cells) == 9 and all(len(digests) == 1 for digests in cells.values()), cells
-    assert len({digest for digests in cells.values() for digest in digests}) == 9
+    assert len(cells) == 10 and all(len(digests) == 1 for digests in cells.values()), cells
+    assert len({digest for digests in cells.values() for digest in digests}) == 10
     for run in panel.runs:
         saved = run.run_dir / "config.yaml"
         if saved.is_file():
@@ -453,8 +453,9 @@ def test_configs_are_compared_within_a_cell_and_by_each_runs_latest_rows(tmp_pat
 
 @pytest.mark.parametrize("directory", ["results/cpu/mm_grid_1/results", "results/cpu/mm_grid_1_delay4/results"])
 def test_committed_records_without_the_new_columns_still_load(directory: str) -> None:
-    """The CPU panels' first runs predate the env_options and config_digest columns; the TrXL, LRU, FFM and Mamba
-    runs added to mm_grid_1 later carry them, one digest per cell. Both kinds load and aggregate side by side."""
+    """The CPU panels' first runs predate the env_options and config_digest columns; the TrXL, LRU, FFM, Mamba and
+    Mamba-2 runs added to mm_grid_1 later carry them, one digest per cell. Both kinds load and aggregate side by
+    side."""
     loaded = results.read_results(ROOT / directory)
     for table in (loaded.episodes, loaded.training):
         digests = dict.fromkeys(table["method"].tolist(), "")

@@ -1,5 +1,5 @@
-"""The parallel scan (agents/memory/scan.py) against a step-by-step loop, the memories built on it (lru, ffm, mamba),
-and a memory of the user's own by import path."""
+"""The parallel scan (agents/memory/scan.py) against a step-by-step loop, the memories built on it (lru, ffm, mamba,
+mamba2), Mamba-2's chunked matrix form against its recurrence, and a memory of the user's own by import path."""
 
 from __future__ import annotations
 
@@ -11,11 +11,20 @@ import torch
 
 from agents.config import ConfigError, LruConfig, ModelConfig, config_from_dict
 from agents.memory import build_memory, memory_class
+from agents.memory.mamba2 import state_space_dual
 from agents.memory.scan import linear_scan, reference_scan
 from agents.trainer import Trainer
 from tests.support.external_memory import LeakyMemory
 
-SCAN_MEMORIES = ("lru", "ffm", "mamba")
+SCAN_MEMORIES = ("lru", "ffm", "mamba", "mamba2")
+
+
+def _small_config(name: str, **fields: int) -> ModelConfig:
+    """A small model config; mamba2 with heads of 4 channels and chunks of 4 steps, so that the small sequences of
+    these tests cross chunk boundaries and the inner width has several heads."""
+    config = ModelConfig(memory=name, **fields)
+    config.mamba2.head_dim, config.mamba2.chunk_size = 4, 4
+    return config
 
 
 def _scan_inputs(s: int, t: int, d: int, complex_: bool, seed: int = 0) -> tuple[torch.Tensor, ...]:
@@ -88,6 +97,60 @@ def test_long_fp32_scans_neither_overflow_nor_drift(length: int) -> None:
         assert ((got.to(truth.dtype) - truth).abs() / scale).max() < 1e-4
 
 
+def _ssd_loop(x, step, rate, b, c, start):
+    """Mamba-2's recurrence one step at a time: h_t = exp(step_t a) h_{t-1} + step_t x_t b_t^T, y_t = h_t c_t."""
+    h, outputs = start, []
+    for t in range(x.shape[1]):
+        decay = torch.exp(step[:, t] * rate)[..., None, None]
+        h = decay * h + (x[:, t] * step[:, t, :, None]).unsqueeze(-1) * b[:, t, None, None, :]
+        outputs.append((h @ c[:, t, None, :, None]).squeeze(-1))
+    return torch.stack(outputs, dim=1), h
+
+
+def _ssd_inputs(s: int, t: int, heads: int, p: int, n: int, seed: int, dtype=torch.float64):
+    generator = torch.Generator().manual_seed(seed)
+    x = torch.randn(s, t, heads, p, generator=generator, dtype=dtype)
+    step = 2 * torch.rand(s, t, heads, generator=generator, dtype=dtype)
+    rate = -8 * torch.rand(heads, generator=generator, dtype=dtype)
+    b, c = (torch.randn(s, t, n, generator=generator, dtype=dtype) for _ in range(2))
+    start = torch.randn(s, heads, p, n, generator=generator, dtype=dtype)
+    return x, step, rate, b, c, start
+
+
+@pytest.mark.parametrize(("length", "chunk"), [(1, 4), (7, 4), (8, 4), (13, 5), (13, 64), (40, 1)])
+def test_mamba2_chunks_equal_the_recurrence_in_values_and_gradients(length: int, chunk: int) -> None:
+    """The state-space-dual form (Q x Q products per chunk, chunk states chained by the scan) gives the recurrence's
+    outputs, final state and gradients: partial last chunks, one chunk longer than the sequence, chunks of 1."""
+    inputs = tuple(v.requires_grad_() for v in _ssd_inputs(3, length, 2, 3, 4, seed=length))
+    fast, slow = state_space_dual(*inputs, chunk=chunk), _ssd_loop(*inputs)
+    weights = [torch.randn_like(v) for v in slow]
+    for got, expected in zip(fast, slow, strict=True):
+        torch.testing.assert_close(got, expected, rtol=1e-10, atol=1e-10)
+    grads = [
+        torch.autograd.grad(sum((v * w).sum() for v, w in zip(out, weights, strict=True)), inputs)
+        for out in (fast, slow)
+    ]
+    for got, expected in zip(*grads, strict=True):
+        torch.testing.assert_close(got, expected, rtol=1e-9, atol=1e-10)
+
+
+def test_mamba2_chunks_stay_finite_and_exact_over_long_fp32_sequences() -> None:
+    """4,096 steps in fp32 with decays from vanishing (step x a = -80 per step) to nearly none: finite, and within
+    1e-4 of the float64 loop (every decay product is exp of a non-positive sum)."""
+    x, step, rate, b, c, start = _ssd_inputs(2, 4096, 3, 2, 3, seed=0)
+    rate = torch.tensor([-40.0, -1e-3, -1e-6], dtype=torch.float64)
+    expected, _ = _ssd_loop(x, step, rate, b, c, start)
+    got, final = state_space_dual(*(v.float() for v in (x, step, rate, b, c, start)), chunk=64)
+    assert torch.isfinite(got).all() and torch.isfinite(final).all()
+    scale = expected.abs().amax(dim=1, keepdim=True)
+    assert ((got.double() - expected).abs() / scale).max() < 1e-4
+
+
+def test_mamba2_refuses_a_head_size_that_does_not_divide_its_width() -> None:
+    with pytest.raises(ConfigError, match=r"model\.mamba2\.head_dim=48 is invalid.*= 64"):
+        config_from_dict({"model": {"memory": "mamba2", "memory_size": 32, "mamba2": {"head_dim": 48}}})
+
+
 def _sequence_batch(memory: torch.nn.Module, features: int, lengths: list[int], seed: int):
     generator = torch.Generator().manual_seed(seed)
     mask = torch.zeros(len(lengths), max(lengths), dtype=torch.bool)
@@ -104,8 +167,7 @@ def test_step_by_step_equals_the_sequence_path(name: str) -> None:
     """Random sequences of random lengths (trailing padding), random start states: the rollout's one-step path and
     the training pass give the same outputs, and gradients reach every parameter."""
     torch.manual_seed(0)
-    config = ModelConfig(memory=name, memory_size=24, memory_layers=2)
-    memory = build_memory(config, 10).double()
+    memory = build_memory(_small_config(name, memory_size=24, memory_layers=2), 10).double()
     steps, start, mask = _sequence_batch(memory, 10, [9, 6, 1, 4], seed=1)
     sequence_output = memory.sequences(steps, start, mask)
     padded = torch.zeros(*mask.shape, 10, dtype=torch.float64).index_put((mask,), steps)
@@ -125,7 +187,7 @@ def test_the_state_carries_across_truncated_sequences(name: str) -> None:
     stores), gives the outputs of the uncut sequence; and a zero state is an episode start (the padding before it is
     never seen)."""
     torch.manual_seed(0)
-    memory = build_memory(ModelConfig(memory=name, memory_size=16), 6).double()
+    memory = build_memory(_small_config(name, memory_size=16), 6).double()
     steps = torch.randn(1, 12, 6, dtype=torch.float64)
     full, _ = memory.run(steps, memory.initial_state(1, "cpu").double())
     first, state = memory.run(steps[:, :5], memory.initial_state(1, "cpu").double())
