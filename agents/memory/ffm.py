@@ -19,7 +19,7 @@ from torch import Tensor, nn
 
 from agents.config import FfmConfig
 from agents.layers import orthogonal
-from agents.memory.scan import Layout, ScanMemory, complex_dtype, linear_scan, widen
+from agents.memory.scan import Layout, ScanMemory, complex_dtype, widen
 
 
 class FFMBlock(nn.Module):
@@ -45,16 +45,15 @@ class FFMBlock(nn.Module):
     def forward(self, x: Tensor, state: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
         u = self.norm(x)  # (N, dim)
         value, gate = widen(self.project(u)).chunk(2, dim=-1)
-        gated = layout.pad(value * torch.sigmoid(gate))  # (S, P, m)
-        inputs = gated.unsqueeze(-1).expand(*gated.shape, self.shape[1])  # (S, P, m, c)
+        gated = value * torch.sigmoid(gate)  # (N, m)
+        inputs = gated.unsqueeze(-1).expand(*gated.shape, self.shape[1])  # (N, m, c)
         start = torch.view_as_complex(widen(state).reshape(-1, *self.shape, 2).contiguous())
         dtype = complex_dtype(value.dtype)
-        traces = linear_scan(self.decay().to(dtype).view(1, 1, *self.shape), inputs.to(dtype), start)
-        traces = torch.view_as_real(traces)  # (S, P, m, c, 2)
-        z = self.mix(layout.unpad(traces).flatten(1).to(x.dtype))
+        traces = torch.view_as_real(layout.scan(self.decay().to(dtype), inputs.to(dtype), start)).flatten(1)
+        z = self.mix(traces.to(x.dtype))
         skip, out_gate = self.skip_gate(u).chunk(2, dim=-1)
         out_gate = torch.sigmoid(out_gate)
-        return x + z * out_gate + skip * (1 - out_gate), traces[:, -1].reshape(-1, self.state_size)
+        return x + z * out_gate + skip * (1 - out_gate), layout.last(traces)
 
 
 class FFM(ScanMemory):

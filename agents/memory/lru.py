@@ -18,7 +18,7 @@ from torch.nn import functional as F
 
 from agents.config import LruConfig
 from agents.layers import orthogonal
-from agents.memory.scan import Layout, ScanMemory, complex_dtype, linear_scan, widen
+from agents.memory.scan import Layout, ScanMemory, complex_dtype, widen
 
 
 class LRUBlock(nn.Module):
@@ -65,13 +65,12 @@ class LRUBlock(nn.Module):
         decay = self.decay().to(complex_dtype(u.dtype))
         gamma = torch.sqrt(1 - decay.abs() ** 2)
         projected = (u @ self.input_weight.T.to(u.dtype)).unflatten(-1, (self.states, 2)) * gamma.unsqueeze(-1)
-        inputs = torch.view_as_complex(layout.pad(projected))  # gamma B u: (S, P, states)
+        inputs = torch.view_as_complex(projected)  # gamma B u: (N, states)
         start = torch.view_as_complex(widen(state).reshape(-1, self.states, 2).contiguous())
-        h = torch.view_as_real(linear_scan(decay.view(1, 1, -1), inputs, start))  # (S, P, states, 2)
-        readout = layout.unpad(h).flatten(1) @ self.output_weight.T.to(u.dtype)
-        y = readout + self.skip * u  # Re(C h) + D u
+        h = torch.view_as_real(layout.scan(decay, inputs, start)).flatten(1)  # (N, 2 states)
+        y = h @ self.output_weight.T.to(u.dtype) + self.skip * u  # Re(C h) + D u
         y = self.out(F.gelu(y).to(x.dtype))
-        return x + y, h[:, -1].reshape(-1, self.state_size)
+        return x + y, layout.last(h)
 
 
 class LRU(ScanMemory):

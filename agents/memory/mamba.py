@@ -25,7 +25,7 @@ from torch.nn import functional as F
 
 from agents.config import MambaConfig
 from agents.layers import orthogonal
-from agents.memory.scan import Layout, ScanMemory, linear_scan, widen
+from agents.memory.scan import Layout, ScanMemory, widen
 
 
 def causal_conv(conv: nn.Conv1d, inputs: Tensor, past: Tensor) -> tuple[Tensor, Tensor]:
@@ -70,16 +70,17 @@ class MambaBlock(nn.Module):
     def forward(self, x: Tensor, state: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
         main, gate = self.project_in(self.norm(x)).chunk(2, dim=-1)  # (N, E) each
         main, tail = causal_conv(self.conv, layout.pad(main), state[:, : self.conv_size])  # (S, P, E)
+        main = layout.unpad(main)  # (N, E)
         delta, b, c = self.select(main).split((self.rank, self.states, self.states), dim=-1)
-        step = widen(F.softplus(self.step_size(delta)))  # (S, P, E)
-        decay = torch.exp(step.unsqueeze(-1) * -torch.exp(self.a_log.to(step.dtype)))  # (S, P, E, N)
+        step = widen(F.softplus(self.step_size(delta)))  # (N, E)
+        decay = torch.exp(step.unsqueeze(-1) * -torch.exp(self.a_log.to(step.dtype)))  # (N, E, N)
         wide = widen(main)
-        inputs = (step * wide).unsqueeze(-1) * widen(b).unsqueeze(2)  # (S, P, E, N)
+        inputs = (step * wide).unsqueeze(-1) * widen(b).unsqueeze(1)  # (N, E, N)
         start = widen(state[:, self.conv_size :].reshape(-1, self.inner, self.states))
-        h = linear_scan(decay, inputs, start)
-        y = layout.unpad((h @ widen(c).unsqueeze(-1)).squeeze(-1) + self.skip * wide)  # C h + D x: (N, E)
+        h = layout.scan(decay, inputs, start)
+        y = (h @ widen(c).unsqueeze(-1)).squeeze(-1) + self.skip * wide  # C h + D x: (N, E)
         y = self.project_out((y * F.silu(widen(gate))).to(x.dtype))
-        return x + y, torch.cat((tail.to(state.dtype), h[:, -1].flatten(1).to(state.dtype)), dim=1)
+        return x + y, torch.cat((tail.to(state.dtype), layout.last(h).flatten(1).to(state.dtype)), dim=1)
 
 
 class Mamba(ScanMemory):

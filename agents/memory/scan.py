@@ -165,13 +165,22 @@ def reference_scan(a: Tensor, b: Tensor, start: Tensor | None = None, reset: Ten
 
 class Layout:
     """Where the N flat steps of a training pass sit in S sequences padded to P steps: ``mask`` (S, P), a prefix of
-    real steps per row, or None when every position is real (a decision of the rollout, or dense sequences). A scan
-    memory's per-step layers (norms, projections, gates) run on the N real steps, so padding costs them nothing (the
-    trainer's sequences are whole episodes padded to the longest of a minibatch: ~2.6 positions per real step on
-    Mortar Mayhem); only the recurrence and the convolutions over time see the padded (S, P) layout."""
+    real steps per row, or None when every position is real (a decision of the rollout, or dense sequences; a mask
+    with no padding is read as None). A scan memory's per-step layers (norms, projections, gates) run on the N real
+    steps, and :meth:`scan` runs the recurrence over them too, so padding costs neither anything (the trainer's
+    sequences are whole episodes padded to the longest of a minibatch: ~2.6 positions per real step on Mortar
+    Mayhem); only convolutions over time use the padded (S, P) layout (:meth:`pad`, :meth:`unpad`)."""
 
     def __init__(self, sequences: int, length: int, mask: Tensor | None = None) -> None:
+        if mask is not None and bool(mask.all()):
+            mask = None
         self.sequences, self.length, self.mask = sequences, length, mask
+        if mask is not None:  # each sequence's first and last real step in the flat order
+            lengths = mask.sum(dim=1)
+            ends = lengths.cumsum(0)
+            present = lengths > 0
+            self.firsts, self.lasts = (ends - lengths)[present], (ends - 1)[present]
+            self.present = present
 
     def pad(self, x: Tensor) -> Tensor:
         """(N, *D) -> (S, P, *D), zeros at the padded positions."""
@@ -182,6 +191,28 @@ class Layout:
     def unpad(self, x: Tensor) -> Tensor:
         """(S, P, *D) -> (N, *D), the real positions in sequence order."""
         return x.reshape(-1, *x.shape[2:]) if self.mask is None else x[self.mask]
+
+    def scan(self, a: Tensor, b: Tensor, start: Tensor) -> Tensor:
+        """:func:`linear_scan` of each sequence from its ``start`` (S, *D) over the flat steps: ``b`` (N, *D), ``a``
+        (N, *D) or broadcast to it. With padding, the N steps run as one stream in which each sequence's first step
+        forgets the step before it and takes its start state instead (h = a start + b there), so padded positions
+        are never computed."""
+        if self.mask is None:
+            dense = (self.sequences, self.length, *b.shape[1:])
+            a = a.expand_as(b).reshape(dense) if a.dim() == b.dim() else a.view(1, 1, *a.shape)
+            return linear_scan(a, b.reshape(dense), start).reshape(b.shape)
+        a = a.expand_as(b)
+        b = b.index_add(0, self.firsts, a[self.firsts] * start[self.present].to(b.dtype))
+        a = a.index_fill(0, self.firsts, 0)
+        return linear_scan(a.unsqueeze(0), b.unsqueeze(0))[0]
+
+    def last(self, h: Tensor) -> Tensor:
+        """The flat steps' values (N, *D) at each sequence's last real step (S, *D); zeros for an empty sequence."""
+        if self.mask is None:
+            return h.reshape(self.sequences, self.length, *h.shape[1:])[:, -1]
+        return h.new_zeros((self.sequences, *h.shape[1:])).index_copy(
+            0, self.present.nonzero().squeeze(1), h[self.lasts]
+        )
 
 
 class ScanMemory(Memory):

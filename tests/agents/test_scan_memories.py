@@ -97,6 +97,44 @@ def test_long_fp32_scans_neither_overflow_nor_drift(length: int) -> None:
         assert ((got.to(truth.dtype) - truth).abs() / scale).max() < 1e-4
 
 
+@pytest.mark.parametrize("per_step", [True, False], ids=["decay-per-step", "constant-decay"])
+def test_the_layout_scans_the_real_steps_as_each_sequence_alone(per_step: bool) -> None:
+    """A minibatch's flat real steps scanned as one stream (each sequence's first step takes its start state) equal
+    each sequence scanned alone, in values and gradients; ``last`` is the state after its last real step (zeros for
+    a sequence with no step), and a mask with no padding takes the dense path."""
+    from agents.memory.scan import Layout
+
+    generator = torch.Generator().manual_seed(3)
+    lengths = [5, 1, 0, 7]
+    mask = torch.arange(7)[None, :] < torch.tensor(lengths)[:, None]
+    n, d = int(mask.sum()), 3
+    a = torch.rand(n, d, generator=generator, dtype=torch.float64) if per_step else torch.rand(d, dtype=torch.float64)
+    b = torch.randn(n, d, generator=generator, dtype=torch.float64)
+    start = torch.randn(len(lengths), d, generator=generator, dtype=torch.float64)
+    inputs = tuple(x.requires_grad_() for x in (a, b, start))
+    layout = Layout(*mask.shape, mask)
+    h = layout.scan(*inputs)
+    expected, finals, offset = [], [], 0
+    for row, length in enumerate(lengths):
+        if not length:
+            finals.append(torch.zeros(d, dtype=torch.float64))
+            continue
+        steps = slice(offset, offset + length)
+        decay = (a[steps] if per_step else a.expand(length, d)).unsqueeze(0)
+        alone = reference_scan(decay, b[steps].unsqueeze(0), start[row : row + 1])[0]
+        expected.append(alone)
+        finals.append(alone[-1])
+        offset += length
+    expected = torch.cat(expected)
+    torch.testing.assert_close(h, expected, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(layout.last(h), torch.stack(finals), rtol=1e-12, atol=1e-12)
+    weights = torch.randn(n, d, dtype=torch.float64)
+    grads = [torch.autograd.grad((y * weights).sum(), inputs) for y in (h, expected)]
+    for got, want in zip(*grads, strict=True):
+        torch.testing.assert_close(got, want, rtol=1e-10, atol=1e-12)
+    assert Layout(2, 3, torch.ones(2, 3, dtype=torch.bool)).mask is None
+
+
 def _ssd_loop(x, step, rate, b, c, start):
     """Mamba-2's recurrence one step at a time: h_t = exp(step_t a) h_{t-1} + step_t x_t b_t^T, y_t = h_t c_t."""
     h, outputs = start, []
