@@ -462,11 +462,11 @@ def test_committed_records_without_the_new_columns_still_load(directory: str) ->
         for method, digest in zip(table["method"].tolist(), table[results.CONFIG_COLUMN].tolist(), strict=True):
             assert digests.setdefault(method, digest) in ("", digest)
             digests[method] = digest
-        later = {"trxl", "lru", "ffm", "mamba"}
+        later = {"trxl", "lru", "ffm", "mamba", "mamba2"}
         assert {method for method, digest in digests.items() if digest} == (
             later if "delay4" not in directory else set()
         )
-    first_runs = [m not in {"trxl", "lru", "ffm", "mamba"} for m in loaded.episodes["method"].tolist()]
+    first_runs = [m not in {"trxl", "lru", "ffm", "mamba", "mamba2"} for m in loaded.episodes["method"].tolist()]
     assert {o for o, old in zip(loaded.episodes[results.OPTIONS_COLUMN].tolist(), first_runs, strict=True) if old} == {
         ""
     }
