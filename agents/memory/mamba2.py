@@ -108,7 +108,9 @@ class Mamba2Block(nn.Module):
         else:
             y, h = state_space_dual(heads, step, rate, b, c, h, self.chunk)
         y = layout.unpad(y + self.skip[:, None] * heads).flatten(1)  # (N, E)
-        y = self.project_out(self.out_norm(y * F.silu(widen(gate))).to(x.dtype))
+        norm = self.out_norm  # in the scan's precision, with the weight of a bf16 model widened to it
+        y = F.rms_norm(y * F.silu(widen(gate)), norm.normalized_shape, norm.weight.to(y.dtype), norm.eps)
+        y = self.project_out(y.to(x.dtype))
         return x + y, torch.cat((tail.to(state.dtype), h.reshape(s, -1).to(state.dtype)), dim=1)
 
 

@@ -75,6 +75,7 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         ("model.memory=lru", "ppo.sequence_length=3", "model.memory_layers=2"),
         ("model.memory=ffm", "ppo.sequence_length=max", "model.ffm.trace_size=4", "model.ffm.context_size=2"),
         ("model.memory=mamba", "ppo.sequence_length=3", "model.mamba.state_size=4", "run.precision=bf16"),
+        ("model.memory=mamba2", "model.mamba2.head_dim=16", "model.mamba2.chunk_size=4", "run.precision=bf16"),
         ("model.memory=tests.support.external_memory:LeakyMemory", "model.memory_options={leak: 0.5}"),
     ],
     ids=[
@@ -88,6 +89,7 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         "lru-3-2layers",
         "ffm-max",
         "mamba-3-bf16",
+        "mamba2-chunks4-bf16",
         "external-memory",
     ],
 )
