@@ -267,4 +267,5 @@ def test_plot_results_finds_the_options_of_older_records_in_the_saved_configs(tm
         "LRU-PPO",
         "FFM-PPO",
         "Mamba-PPO",
+        "Mamba2-PPO",
     ]
