@@ -744,7 +744,7 @@ def _check_block(block: Any, prefix: str) -> None:
                 raise ConfigError(f"{prefix}.memory={block.memory!r}: {err}") from err
         else:
             _choice(f"{prefix}.memory", block.memory, tuple(MEMORY_MODULES))
-        inner = block.mamba2.expand * block.memory_size
+        inner = block.mamba2.expand * block.memory_size  # Mamba-2's heads split its inner width
         if block.memory == "mamba2" and inner % block.mamba2.head_dim:
             raise ConfigError(
                 f"{prefix}.mamba2.head_dim={block.mamba2.head_dim} is invalid: expected a divisor of the inner width "

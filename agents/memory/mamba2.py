@@ -40,8 +40,13 @@ def state_space_dual(
     """h_t = exp(step_t a) h_{t-1} + step_t x_t b_t^T, y_t = h_t c_t for S sequences of T steps and H heads: ``x``
     (S, T, H, P), ``step`` (S, T, H) >= 0, ``log_decay_rate`` a (H,) <= 0, ``b``, ``c`` (S, T, N), ``start`` (S, H,
     P, N) the state before each sequence. Returns y (S, T, H, P) and the state after the last step (S, H, P, N),
-    computed in chunks of ``chunk`` steps (steps past T are padded with step 0: decay 1, no input)."""
+    computed in chunks of ``chunk`` steps (steps past T are padded with step 0: decay 1, no input); one step (a
+    decision of the rollout) is the recurrence itself."""
     s, t, heads, p = x.shape
+    if t == 1:
+        decay = (step[:, 0] * log_decay_rate)[..., None, None].exp()
+        h = decay * start + (x[:, 0] * step[:, 0, :, None]).unsqueeze(-1) * b[:, 0, None, None, :]
+        return (h @ c[:, 0, None, :, None]).view(s, 1, heads, p), h
     q = min(chunk, t)
     n = -(-t // q)
     pad = n * q - t
@@ -101,12 +106,7 @@ class Mamba2Block(nn.Module):
         s, t = step.shape[:2]
         heads = main.reshape(s, t, self.heads, self.head_dim)
         h = widen(state[:, self.conv_size :]).reshape(s, self.heads, self.head_dim, self.states)
-        if t == 1:  # one decision: the recurrence itself
-            decay = (step[:, 0] * rate)[..., None, None].exp()
-            h = decay * h + (heads[:, 0] * step[:, 0, :, None]).unsqueeze(-1) * b[:, 0, None, None, :]
-            y = (h @ c[:, 0, None, :, None]).view(s, 1, self.heads, self.head_dim)
-        else:
-            y, h = state_space_dual(heads, step, rate, b, c, h, self.chunk)
+        y, h = state_space_dual(heads, step, rate, b, c, h, self.chunk)
         y = layout.unpad(y + self.skip[:, None] * heads).flatten(1)  # (N, E)
         norm = self.out_norm  # in the scan's precision, with the weight of a bf16 model widened to it
         y = F.rms_norm(y * F.silu(widen(gate)), norm.normalized_shape, norm.weight.to(y.dtype), norm.eps)
