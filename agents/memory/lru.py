@@ -64,8 +64,10 @@ class LRUBlock(nn.Module):
         u = widen(self.norm(x))  # (N, dim)
         decay = self.decay().to(complex_dtype(u.dtype))
         gamma = torch.sqrt(1 - decay.abs() ** 2)
-        projected = (u @ self.input_weight.T.to(u.dtype)).unflatten(-1, (self.states, 2)) * gamma.unsqueeze(-1)
-        inputs = torch.view_as_complex(projected)  # gamma B u: (N, states)
+        # gamma scales B's rows (re and im of a state alike), not the (N, 2 states) product: a pass over the weights
+        # instead of two over the steps (forward and backward)
+        scaled_input = self.input_weight * gamma.repeat_interleave(2).unsqueeze(1)
+        inputs = torch.view_as_complex((u @ scaled_input.T.to(u.dtype)).unflatten(-1, (self.states, 2)))  # gamma B u
         start = torch.view_as_complex(widen(state).reshape(-1, self.states, 2).contiguous())
         h = torch.view_as_real(layout.scan(decay, inputs, start)).flatten(1)  # (N, 2 states)
         y = h @ self.output_weight.T.to(u.dtype) + self.skip * u  # Re(C h) + D u
