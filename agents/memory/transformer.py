@@ -200,25 +200,26 @@ class Block(nn.Module):
 
     @staticmethod
     def relative_logits(q: Tensor, table: Tensor, keys: int) -> Tensor:
-        """The relative term (S, heads, P, K) of queries (S, heads, P, head_dim) for K keys of which key kk lies
+        """The relative term (heads, S, P, K) of queries (heads, S, P, head_dim) for K keys of which key kk lies
         (K - P) + p - kk steps before query p, from the ``table``'s columns (see :meth:`relative_table`). Query p's
-        terms are query 0's shifted by p keys, so one product per query and distance (S, heads, P, M) and a skew
+        terms are query 0's shifted by p keys, so one product per query and distance (heads, S, P, M) and a skew
         (pad each row to K + 1, read the rows K apart) place them, where a gather would need an index per logit;
         the keys out of reach get other terms, which the mask drops."""
-        s, h, p, _ = q.shape
+        h, s, p, _ = q.shape
         m = table.shape[-1]
         # (H, S P, hd) @ (H, hd, M): the table is read once per head, not broadcast to a copy per sequence
-        by_distance = (q.transpose(0, 1).reshape(h, s * p, -1) @ table).view(h, s, p, m).transpose(0, 1)
-        return F.pad(by_distance, (0, keys + 1 - m)).flatten(-2)[..., : p * keys].view(s, h, p, keys)
+        by_distance = (q.reshape(h, s * p, -1) @ table).view(h, s, p, m)
+        return F.pad(by_distance, (0, keys + 1 - m)).flatten(-2)[..., : p * keys].view(h, s, p, keys)
 
     def attend(self, q: Tensor, k: Tensor, v: Tensor, valid: Tensor, table: Tensor | None) -> Tensor:
-        """Attention of the queries (S, heads, P, head_dim) over keys and values (S, heads, K, head_dim) where
+        """Attention of the queries (heads, S, P, head_dim) over keys and values (heads, S, K, head_dim) where
         ``valid`` (S, P, K); a query with no valid key gets exactly zero. ``table``: the relative encoding's
-        (:meth:`relative_logits`)."""
-        logits = q @ k.transpose(-1, -2)  # (S, H, P, K)
+        (:meth:`relative_logits`). Heads lead, so that (heads, S) is one batch dimension of contiguous matrices:
+        with sequences first, the products would copy every operand to that layout (forward and backward)."""
+        logits = q @ k.transpose(-1, -2)  # (H, S, P, K)
         if table is not None:
             logits = logits + self.relative_logits(q, table, k.shape[-2])
-        return self._weights(logits, valid.unsqueeze(1)).to(v.dtype) @ v
+        return self._weights(logits, valid).to(v.dtype) @ v
 
     def _weights(self, logits: Tensor, mask: Tensor) -> Tensor:
         """Attention weights of raw ``logits`` over the keys (last dim) where ``mask`` (broadcast to them): scaled,
@@ -377,12 +378,14 @@ class TransformerXL(Memory):
         position = self._positions(key_step.flatten().index_select(0, needed), dtype)
         for layer, block in enumerate(self.blocks):
             memory = read[:, layer].to(dtype)
-            keys_values = []
+            keys_values = []  # (H, S, K, hd) each, heads first (see Block.attend)
             for projected in block.keys_values(memory if position is None else memory + position):
-                padded = projected.new_zeros((s * k_len, *projected.shape[1:])).index_copy(0, needed, projected)
-                keys_values.append(padded.view(s, k_len, *projected.shape[1:]).transpose(1, 2))
-            q = block.queries(h)  # the real steps' (N, H, hd), padded to the sequences' layout for the attention
-            q = q.new_zeros((s * p, *q.shape[1:])).index_copy(0, rows, q).view(s, p, *q.shape[1:]).transpose(1, 2)
-            attended = block.attend(q, *keys_values, valid, block.relative_table(self.distances))
-            h = block.update(h, attended.transpose(1, 2).reshape(s * p, -1).index_select(0, rows))
+                heads, head_dim = projected.shape[1:]
+                padded = projected.new_zeros((heads, s * k_len, head_dim))
+                keys_values.append(padded.index_copy(1, needed, projected.transpose(0, 1)).view(heads, s, k_len, -1))
+            q = block.queries(h).transpose(0, 1)  # the real steps' (H, N, hd), padded to the sequences' layout
+            q = q.new_zeros((q.shape[0], s * p, q.shape[2])).index_copy(1, rows, q).view(q.shape[0], s, p, -1)
+            attended = block.attend(q, *keys_values, valid, block.relative_table(self.distances))  # (H, S, P, hd)
+            attended = attended.flatten(1, 2).index_select(1, rows)  # (H, N, hd): the real steps
+            h = block.update(h, attended.transpose(0, 1).reshape(rows.shape[0], -1))
         return h

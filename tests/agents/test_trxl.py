@@ -3,6 +3,8 @@ encodings, bounded memory on endless episodes, GTrXL gating, and the config's ch
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -199,12 +201,16 @@ def test_no_attention_across_episodes_to_itself_or_the_future() -> None:
 
 def test_the_empty_window_gives_zero_attention_not_a_softmax_over_padding() -> None:
     block = _memory().blocks[0]
-    query, keys, values = torch.randn(2, 2, 1, 4), torch.randn(2, 2, 4, 4), torch.randn(2, 2, 4, 4)
-    valid = torch.zeros(2, 1, 4, dtype=torch.bool)
+    # 2 heads x 3 sequences, heads first: sequence 0 has no valid key, sequence 1 one, sequence 2 all four
+    query, keys, values = torch.randn(2, 3, 1, 4), torch.randn(2, 3, 4, 4), torch.randn(2, 3, 4, 4)
+    valid = torch.zeros(3, 1, 4, dtype=torch.bool)
     valid[1, 0, 2] = True
+    valid[2] = True
     attended = block.attend(query, keys, values, valid, None)
-    torch.testing.assert_close(attended[0], torch.zeros(2, 1, 4), atol=0, rtol=0)  # no value reaches it
-    torch.testing.assert_close(attended[1], values[1, :, 2:3])  # the one valid key gets all the weight
+    torch.testing.assert_close(attended[:, 0], torch.zeros(2, 1, 4), atol=0, rtol=0)  # no value reaches it
+    torch.testing.assert_close(attended[:, 1], values[:, 1, 2:3])  # the one valid key gets all the weight
+    weights = torch.softmax(query[:, 2] @ keys[:, 2].mT / math.sqrt(block.head_dim), dim=-1)
+    torch.testing.assert_close(attended[:, 2], weights @ values[:, 2])  # each head over its own keys
 
 
 def test_padding_changes_no_output_and_no_gradient() -> None:
