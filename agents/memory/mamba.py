@@ -31,16 +31,42 @@ from agents.memory.scan import Layout, ScanMemory, widen
 def causal_conv(conv: nn.Conv1d, inputs: Tensor, past: Tensor) -> tuple[Tensor, Tensor]:
     """SiLU of the depthwise ``conv`` (kernel k) over ``inputs`` (S, T, W) preceded by the k - 1 inputs before them,
     ``past`` (S, (k - 1) * W) as the state keeps them; returns (S, T, W) and the last k - 1 inputs in the same form.
-    Computed as k shifted multiply-adds on the (S, T, W) layout: measured 1.4x faster forward + backward than
-    ``conv1d`` on its (S, W, T) layout at a minibatch's shapes, with no transposed copies."""
+    Computed as k shifted multiply-adds on the (S, T, W) layout (:class:`ShiftedConv`): measured 1.4x faster forward
+    + backward than ``conv1d`` on its (S, W, T) layout at a minibatch's shapes, with no transposed copies."""
     s, t, width = inputs.shape
     kernel = conv.kernel_size[0]
     window = torch.cat((past.reshape(s, kernel - 1, width).to(inputs.dtype), inputs), dim=1)  # (S, k - 1 + T, W)
     weight = conv.weight.squeeze(1).T.to(inputs.dtype)  # (k, W)
-    out = torch.addcmul(conv.bias.to(inputs.dtype), window[:, :t], weight[0])
-    for shift in range(1, kernel):
-        out = torch.addcmul(out, window[:, shift : shift + t], weight[shift])
-    return F.silu(out), window[:, t:].reshape(s, (kernel - 1) * width)
+    out = ShiftedConv.apply(window, weight, conv.bias.to(inputs.dtype))
+    return out, window[:, t:].reshape(s, (kernel - 1) * width)
+
+
+class ShiftedConv(torch.autograd.Function):
+    """SiLU(b + sum_j window[:, j : j + T] * w_j) over a window (S, k - 1 + T, W) with per-channel weights w (k, W)
+    and bias (W,). Its own backward writes the window's gradient in place, shift by shift: autograd of the k slices
+    would zero a window-sized tensor per shift and add them up (4 fills and 4 passes more, on fresh pages)."""
+
+    @staticmethod
+    def forward(ctx, window: Tensor, weight: Tensor, bias: Tensor) -> Tensor:  # type: ignore[override]
+        kernel = weight.shape[0]
+        t = window.shape[1] - kernel + 1
+        out = torch.addcmul(bias, window[:, :t], weight[0])
+        for shift in range(1, kernel):
+            out.addcmul_(window[:, shift : shift + t], weight[shift])
+        ctx.save_for_backward(window, weight, out)
+        return F.silu(out)
+
+    @staticmethod
+    def backward(ctx, grad: Tensor) -> tuple[Tensor, Tensor, Tensor]:  # type: ignore[override]
+        window, weight, out = ctx.saved_tensors
+        kernel, t = weight.shape[0], out.shape[1]
+        grad = torch.ops.aten.silu_backward(grad, out)
+        grad_window = torch.zeros_like(window)
+        grad_weight = torch.empty_like(weight)
+        for shift in range(kernel):
+            grad_window[:, shift : shift + t].addcmul_(grad, weight[shift])
+            grad_weight[shift] = (grad * window[:, shift : shift + t]).sum((0, 1))
+        return grad_window, grad_weight, grad.sum((0, 1))
 
 
 class MambaBlock(nn.Module):
@@ -73,15 +99,22 @@ class MambaBlock(nn.Module):
         main = layout.unpad(main)  # (N, E)
         delta, b, c = self.select(main).split((self.rank, self.states, self.states), dim=-1)
         step = widen(F.softplus(self.step_size(delta)))  # (N, E)
-        decay = torch.exp(step.unsqueeze(-1) * -torch.exp(self.a_log.to(step.dtype)))  # (N, E, N)
+        rate = -torch.exp(self.a_log.to(step.dtype))  # A (E, N)
         wide = widen(main)
-        inputs = (step * wide).unsqueeze(-1) * widen(b).unsqueeze(1)  # (N, E, N)
         start = widen(state[:, self.conv_size :].reshape(-1, self.inner, self.states))
-        h = layout.scan(decay, inputs, start)
-        # C h + D x: (N, E); a product and a sum, 1.7x faster forward + backward than a batched (E, N) @ (N, 1)
-        y = (h * widen(c).unsqueeze(1)).sum(-1) + self.skip * wide
-        y = self.project_out((y * F.silu(widen(gate))).to(x.dtype))
-        return x + y, torch.cat((tail.to(state.dtype), layout.last(h).flatten(1).to(state.dtype)), dim=1)
+
+        def build(step: Tensor, wide: Tensor, b: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
+            # decays exp(Delta A) and inputs Delta x B^T: (n, E, N) each, for a block of n steps only
+            return torch.exp(step.unsqueeze(-1) * rate), (step * wide).unsqueeze(-1) * b.unsqueeze(1)
+
+        def readout(h: Tensor, step: Tensor, wide: Tensor, b: Tensor, c: Tensor) -> Tensor:
+            # C h: (n, E); a product and a sum, 1.7x faster forward + backward than a batched (E, N) @ (N, 1)
+            return (h * c.unsqueeze(1)).sum(-1)
+
+        # the (N, E, N) decays, inputs and states never exist whole: the scan runs in blocks (Layout.scan_readout)
+        read, last = layout.scan_readout(build, readout, (step, wide, widen(b), widen(c)), start)
+        y = self.project_out(((read + self.skip * wide) * F.silu(widen(gate))).to(x.dtype))
+        return x + y, torch.cat((tail.to(state.dtype), last.flatten(1).to(state.dtype)), dim=1)
 
 
 class Mamba(ScanMemory):

@@ -135,6 +135,89 @@ def test_the_layout_scans_the_real_steps_as_each_sequence_alone(per_step: bool) 
     assert Layout(2, 3, torch.ones(2, 3, dtype=torch.bool)).mask is None
 
 
+@pytest.mark.parametrize("block_elements", [1, 3 * 4 * 2, 10**6], ids=["1-step", "2-step", "whole"])
+@pytest.mark.parametrize("padded", [True, False], ids=["padded", "dense"])
+def test_the_scan_in_blocks_with_a_readout_equals_the_whole_scan(padded: bool, block_elements: int) -> None:
+    """Layout.scan_readout (Mamba's path: decays, inputs and states built and read block by block, recomputed in the
+    backward pass) gives the outputs, last states and gradients of building everything, scanning it whole
+    (Layout.scan) and reading it out, with sequences starting inside blocks, an empty sequence and start states."""
+    from agents.memory.scan import Layout
+
+    generator = torch.Generator().manual_seed(5)
+    lengths = [5, 1, 0, 7] if padded else [6, 6, 6]
+    mask = torch.arange(max(lengths))[None, :] < torch.tensor(lengths)[:, None]
+    n, width, states = int(mask.sum()), 3, 4
+    rate = -torch.rand(width, states, generator=generator, dtype=torch.float64)
+    step, x = torch.rand(n, width, generator=generator, dtype=torch.float64), torch.randn(n, width, dtype=torch.float64)
+    b, c = torch.randn(n, states, dtype=torch.float64), torch.randn(n, states, dtype=torch.float64)
+    start = torch.randn(len(lengths), width, states, generator=generator, dtype=torch.float64)
+    leaves = tuple(v.requires_grad_() for v in (rate, step, x, b, c, start))
+
+    def build(step, x, b, c):
+        return torch.exp(step.unsqueeze(-1) * rate), (step * x).unsqueeze(-1) * b.unsqueeze(1)
+
+    def readout(h, step, x, b, c):
+        return (h * c.unsqueeze(1)).sum(-1)
+
+    layout = Layout(*mask.shape, mask)
+    y, last = layout.scan_readout(build, readout, (step, x, b, c), start, block_elements)
+    h = layout.scan(*build(step, x, b, c), start)
+    y_whole, last_whole = readout(h, step, x, b, c), layout.last(h)
+    torch.testing.assert_close(y, y_whole, rtol=1e-12, atol=1e-12)
+    torch.testing.assert_close(last, last_whole, rtol=1e-12, atol=1e-12)
+    weights = torch.randn(y.shape, dtype=torch.float64), torch.randn(last.shape, dtype=torch.float64)
+    grads = [
+        torch.autograd.grad((out * weights[0]).sum() + (fin * weights[1]).sum(), leaves)
+        for out, fin in ((y, last), (y_whole, last_whole))
+    ]
+    for got, want in zip(*grads, strict=True):
+        torch.testing.assert_close(got, want, rtol=1e-10, atol=1e-12)
+    with torch.no_grad():  # acting and evaluation: the same blocks, no checkpointing
+        torch.testing.assert_close(layout.scan_readout(build, readout, (step, x, b, c), start, block_elements)[0], y)
+
+
+def test_mamba_in_blocks_trains_as_in_one_block(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The Mamba block through blocks of a few steps (a minibatch larger than one block) gives the outputs and
+    gradients of one block."""
+    import agents.memory.scan as scan
+
+    torch.manual_seed(0)
+    memory = build_memory(_small_config("mamba", memory_size=8, memory_layers=2), 10).double()
+    steps, start, mask = _sequence_batch(memory, 10, [9, 6, 1, 4], seed=2)
+
+    def outputs_and_grads() -> tuple[torch.Tensor, list[torch.Tensor]]:
+        memory.zero_grad()
+        output = memory.sequences(steps, start, mask)
+        output.square().sum().backward()
+        return output.detach(), [p.grad.clone() for p in memory.parameters()]
+
+    whole, whole_grads = outputs_and_grads()
+    inner = memory.blocks[0].inner * memory.blocks[0].states
+    monkeypatch.setattr(scan, "BLOCK_ELEMENTS", 3 * inner)  # blocks of 3 steps
+    blocked, blocked_grads = outputs_and_grads()
+    torch.testing.assert_close(blocked, whole, rtol=1e-10, atol=1e-12)
+    for got, want in zip(blocked_grads, whole_grads, strict=True):
+        torch.testing.assert_close(got, want, rtol=1e-9, atol=1e-12)
+
+
+def test_the_shifted_convolution_has_the_gradients_of_autograd() -> None:
+    """Mamba's depthwise convolution (its own backward) against the same shifted multiply-adds under autograd."""
+    from torch.nn import functional as F
+
+    from agents.memory.mamba import ShiftedConv
+
+    generator = torch.Generator().manual_seed(6)
+    window, weight, bias = (
+        torch.randn(shape, generator=generator, dtype=torch.float64).requires_grad_()
+        for shape in ((3, 7 + 3, 5), (4, 5), (5,))
+    )
+    out = bias + sum(window[:, shift : shift + 7] * weight[shift] for shift in range(4))
+    expected = F.silu(out)
+    got = ShiftedConv.apply(window, weight, bias)
+    torch.testing.assert_close(got, expected, rtol=1e-12, atol=1e-12)
+    assert torch.autograd.gradcheck(ShiftedConv.apply, (window, weight, bias))
+
+
 def _ssd_loop(x, step, rate, b, c, start):
     """Mamba-2's recurrence one step at a time: h_t = exp(step_t a) h_{t-1} + step_t x_t b_t^T, y_t = h_t c_t."""
     h, outputs = start, []
