@@ -228,30 +228,35 @@ class Layout:
 
         Runs over time in blocks of about ``block_elements`` states (default :data:`BLOCK_ELEMENTS`), each chained
         from the one before, and keeps no state, decay or input beyond its block: with autograd, each block is
-        recomputed in the backward pass (activation checkpointing), which saves only the state entering it. Whole
+        recomputed in the backward pass (activation checkpointing), which saves only the state entering it (a scan of
+        at most two blocks runs whole, as it fits the cache already). Whole
         (N, *D) tensors would be read and written some 40 times over a forward and backward pass (268 MB each for
         Mamba at width 128 over 16 x 1,024 steps); in blocks that stay in the CPU's cache, that scan and readout
         took 1.0 s instead of 2.6 s (one thread), and the memory they held is gone."""
         rows = self.sequences if self.mask is None else 1  # streams: the dense sequences, or the one flat stream
         steps = per_step[0].shape[0] // rows
         state_width = start[0].numel()
-        block = max(1, min(steps, (block_elements or BLOCK_ELEMENTS) // max(1, rows * state_width)))
-        streams = tuple(x.reshape(rows, steps, *x.shape[1:]) for x in per_step)
+        block_elements = block_elements or BLOCK_ELEMENTS
+        whole = rows * steps * state_width <= 2 * block_elements  # fits the cache as it is: nothing to recompute
+        block = max(1, steps) if whole else max(1, block_elements // max(1, rows * state_width))
+        # split, not sliced: one backward node joins the blocks' gradients, where a slice's would zero a whole-size
+        # tensor per block
+        blocks = tuple(x.reshape(rows, steps, *x.shape[1:]).split(block, dim=1) for x in per_step)
         if self.mask is None:  # the dense sequences start from their states
             h, firsts, lasts = start, None, None
         else:  # one stream, in which each sequence's first step takes its start state (see scan)
             h, firsts, lasts = start.new_zeros((1, *start.shape[1:])), self.firsts, self.lasts
             start = start[self.present]
         outputs, finals = [], []
-        for begin in range(0, steps, block):
+        for index, begin in enumerate(range(0, steps, block)):
             end = min(steps, begin + block)
-            block_steps = tuple(x[:, begin:end] for x in streams)
+            block_steps = tuple(x[index] for x in blocks)
             restarts = None
             if firsts is not None:
                 inside = (firsts >= begin) & (firsts < end)
                 restarts = (firsts[inside] - begin, start[inside])
             run = functools.partial(_scan_block, build, readout, restarts)
-            if torch.is_grad_enabled():
+            if torch.is_grad_enabled() and not whole:
                 y, states, h = checkpoint(run, h, *block_steps, use_reentrant=False)
             else:
                 y, states, h = run(h, *block_steps)
