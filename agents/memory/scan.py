@@ -228,11 +228,11 @@ class Layout:
 
         Runs over time in blocks of about ``block_elements`` states (default :data:`BLOCK_ELEMENTS`), each chained
         from the one before, and keeps no state, decay or input beyond its block: with autograd, each block is
-        recomputed in the backward pass (activation checkpointing), which saves only the state entering it (a scan of
-        at most two blocks runs whole, as it fits the cache already). Whole
-        (N, *D) tensors would be read and written some 40 times over a forward and backward pass (268 MB each for
-        Mamba at width 128 over 16 x 1,024 steps); in blocks that stay in the CPU's cache, that scan and readout
-        took 1.0 s instead of 2.6 s (one thread), and the memory they held is gone."""
+        recomputed in the backward pass (activation checkpointing), which saves only the state entering it; a scan
+        of at most two blocks runs whole, as it fits the cache already. Whole (N, *D) tensors would be read and
+        written some 40 times over a forward and backward pass (268 MB each for Mamba at width 128 over 16 x 1,024
+        steps); in blocks that stay in the CPU's cache, that scan and readout took 1.0 s instead of 2.6 s (one
+        thread), and the memory they held is gone."""
         rows = self.sequences if self.mask is None else 1  # streams: the dense sequences, or the one flat stream
         steps = per_step[0].shape[0] // rows
         state_width = start[0].numel()
