@@ -167,6 +167,7 @@ def reference_scan(a: Tensor, b: Tensor, start: Tensor | None = None, reset: Ten
 
 
 BLOCK_ELEMENTS = 2**21  # states per block of Layout.scan_readout: 8 MB in fp32, measured fastest among 2^19..2^23
+WHOLE_ELEMENTS = 2**23  # up to this many states (32 MB in fp32, the CPU's last-level cache) it runs whole
 
 
 class Layout:
@@ -219,6 +220,7 @@ class Layout:
         per_step: tuple[Tensor, ...],
         start: Tensor,
         block_elements: int | None = None,
+        whole_elements: int | None = None,
     ) -> tuple[Tensor, Tensor]:
         """:meth:`scan` and a readout of its states for a memory whose state is much wider than what it reads and
         writes per step (Mamba: E x N states from E inputs and E outputs): ``build(*steps)`` makes the decays and
@@ -228,16 +230,18 @@ class Layout:
 
         Runs over time in blocks of about ``block_elements`` states (default :data:`BLOCK_ELEMENTS`), each chained
         from the one before, and keeps no state, decay or input beyond its block: with autograd, each block is
-        recomputed in the backward pass (activation checkpointing), which saves only the state entering it; a scan
-        of at most two blocks runs whole, as it fits the cache already. Whole (N, *D) tensors would be read and
-        written some 40 times over a forward and backward pass (268 MB each for Mamba at width 128 over 16 x 1,024
-        steps); in blocks that stay in the CPU's cache, that scan and readout took 1.0 s instead of 2.6 s (one
-        thread), and the memory they held is gone."""
+        recomputed in the backward pass (activation checkpointing), which saves only the state entering it. Whole
+        (N, *D) tensors would be read and written some 40 times over a forward and backward pass (268 MB each for
+        Mamba at width 128 over 16 x 1,024 steps); in blocks that stay in the CPU's cache, that scan and readout
+        took 1.0 s instead of 2.6 s (one thread), and the memory they held is gone. A scan of at most
+        ``whole_elements`` states (default :data:`WHOLE_ELEMENTS`) runs whole, without recomputation, as it fits
+        the cache already: a Mortar Mayhem minibatch at width 512 (~4-6M states) trained 5% slower in blocks."""
         rows = self.sequences if self.mask is None else 1  # streams: the dense sequences, or the one flat stream
         steps = per_step[0].shape[0] // rows
         state_width = start[0].numel()
         block_elements = block_elements or BLOCK_ELEMENTS
-        whole = rows * steps * state_width <= 2 * block_elements  # fits the cache as it is: nothing to recompute
+        whole_elements = WHOLE_ELEMENTS if whole_elements is None else whole_elements
+        whole = rows * steps * state_width <= whole_elements  # fits the cache as it is: nothing to recompute
         block = max(1, steps) if whole else max(1, block_elements // max(1, rows * state_width))
         # split, not sliced: one backward node joins the blocks' gradients, where a slice's would zero a whole-size
         # tensor per block

@@ -135,9 +135,13 @@ def test_the_layout_scans_the_real_steps_as_each_sequence_alone(per_step: bool) 
     assert Layout(2, 3, torch.ones(2, 3, dtype=torch.bool)).mask is None
 
 
-@pytest.mark.parametrize("block_elements", [1, 3 * 4 * 2, 10**6], ids=["1-step", "2-step", "whole"])
+@pytest.mark.parametrize(
+    ("block_elements", "whole_elements"), [(1, 0), (3 * 4 * 2, 0), (1, 10**6)], ids=["1-step", "2-step", "whole"]
+)
 @pytest.mark.parametrize("padded", [True, False], ids=["padded", "dense"])
-def test_the_scan_in_blocks_with_a_readout_equals_the_whole_scan(padded: bool, block_elements: int) -> None:
+def test_the_scan_in_blocks_with_a_readout_equals_the_whole_scan(
+    padded: bool, block_elements: int, whole_elements: int
+) -> None:
     """Layout.scan_readout (Mamba's path: decays, inputs and states built and read block by block, recomputed in the
     backward pass) gives the outputs, last states and gradients of building everything, scanning it whole
     (Layout.scan) and reading it out, with sequences starting inside blocks, an empty sequence and start states."""
@@ -160,7 +164,7 @@ def test_the_scan_in_blocks_with_a_readout_equals_the_whole_scan(padded: bool, b
         return (h * c.unsqueeze(1)).sum(-1)
 
     layout = Layout(*mask.shape, mask)
-    y, last = layout.scan_readout(build, readout, (step, x, b, c), start, block_elements)
+    y, last = layout.scan_readout(build, readout, (step, x, b, c), start, block_elements, whole_elements)
     h = layout.scan(*build(step, x, b, c), start)
     y_whole, last_whole = readout(h, step, x, b, c), layout.last(h)
     torch.testing.assert_close(y, y_whole, rtol=1e-12, atol=1e-12)
@@ -173,7 +177,8 @@ def test_the_scan_in_blocks_with_a_readout_equals_the_whole_scan(padded: bool, b
     for got, want in zip(*grads, strict=True):
         torch.testing.assert_close(got, want, rtol=1e-10, atol=1e-12)
     with torch.no_grad():  # acting and evaluation: the same blocks, no checkpointing
-        torch.testing.assert_close(layout.scan_readout(build, readout, (step, x, b, c), start, block_elements)[0], y)
+        blocked = layout.scan_readout(build, readout, (step, x, b, c), start, block_elements, whole_elements)[0]
+        torch.testing.assert_close(blocked, y)
 
 
 def test_mamba_in_blocks_trains_as_in_one_block(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -194,6 +199,7 @@ def test_mamba_in_blocks_trains_as_in_one_block(monkeypatch: pytest.MonkeyPatch)
     whole, whole_grads = outputs_and_grads()
     inner = memory.blocks[0].inner * memory.blocks[0].states
     monkeypatch.setattr(scan, "BLOCK_ELEMENTS", 3 * inner)  # blocks of 3 steps
+    monkeypatch.setattr(scan, "WHOLE_ELEMENTS", 0)
     blocked, blocked_grads = outputs_and_grads()
     torch.testing.assert_close(blocked, whole, rtol=1e-10, atol=1e-12)
     for got, want in zip(blocked_grads, whole_grads, strict=True):
