@@ -208,9 +208,7 @@ class Layout:
             dense = (self.sequences, self.length, *b.shape[1:])
             a = a.expand_as(b).reshape(dense) if a.dim() == b.dim() else a.view(1, 1, *a.shape)
             return linear_scan(a, b.reshape(dense), start).reshape(b.shape)
-        a = a.expand_as(b)
-        b = b.index_add(0, self.firsts, a[self.firsts] * start[self.present].to(b.dtype))
-        a = a.index_fill(0, self.firsts, 0)
+        a, b = _restart(a.expand_as(b), b, self.firsts, start[self.present])
         return linear_scan(a.unsqueeze(0), b.unsqueeze(0))[0]
 
     def scan_readout(
@@ -268,20 +266,25 @@ class Layout:
             if lasts is not None:
                 finals.append(states[lasts[(lasts >= begin) & (lasts < end)] - begin])
         y = torch.cat(outputs, dim=1).flatten(0, 1)
-        if lasts is None:
-            return y, h
-        last = torch.cat(finals)
-        return y, last.new_zeros((self.sequences, *last.shape[1:])).index_copy(
-            0, self.present.nonzero().squeeze(1), last
-        )
+        return y, h if lasts is None else self._per_sequence(torch.cat(finals))
 
     def last(self, h: Tensor) -> Tensor:
         """The flat steps' values (N, *D) at each sequence's last real step (S, *D); zeros for an empty sequence."""
         if self.mask is None:
             return h.reshape(self.sequences, self.length, *h.shape[1:])[:, -1]
-        return h.new_zeros((self.sequences, *h.shape[1:])).index_copy(
-            0, self.present.nonzero().squeeze(1), h[self.lasts]
+        return self._per_sequence(h[self.lasts])
+
+    def _per_sequence(self, values: Tensor) -> Tensor:
+        """One row per present sequence (their order) -> (S, ...), zeros for the empty sequences."""
+        return values.new_zeros((self.sequences, *values.shape[1:])).index_copy(
+            0, self.present.nonzero().squeeze(1), values
         )
+
+
+def _restart(a: Tensor, b: Tensor, positions: Tensor, starts: Tensor) -> tuple[Tensor, Tensor]:
+    """Flat steps ``positions`` of a stream start a sequence from ``starts`` (one state each): there h = a start + b,
+    whatever came before (a zeroed, a start added to b)."""
+    return a.index_fill(0, positions, 0), b.index_add(0, positions, a[positions] * starts.to(b.dtype))
 
 
 def _scan_block(
@@ -299,9 +302,7 @@ def _scan_block(
     a, b = build(*flat)
     a = a.expand_as(b)
     if restarts is not None and restarts[0].numel():
-        positions, starts = restarts
-        b = b.index_add(0, positions, a[positions] * starts.to(b.dtype))
-        a = a.index_fill(0, positions, 0)
+        a, b = _restart(a, b, *restarts)
     hs = linear_scan(a.reshape(r, n, *b.shape[1:]), b.reshape(r, n, *b.shape[1:]), h.to(b.dtype))
     flat_states = hs.reshape(r * n, *b.shape[1:])
     y = readout(flat_states, *flat)
