@@ -71,6 +71,7 @@ class Decision:
     log_probs: Tensor  # (B, branches)
     values: Tensor  # (B,)
     next_state: Tensor
+    ground_truth: Tensor | None = None  # (B, G) float32: the environment's info["ground_truth"] of these inputs
 
 
 @dataclass
@@ -163,8 +164,12 @@ class Actor:
             if name in inputs:
                 newest[name] = inputs[name]
         record = self.model.memory.record(state, next_state)
+        ground_truth = None
+        if self.model.ground_truth_size:  # the targets of the auxiliary loss: what the environment is at these inputs
+            truth = self.core.step_infos()["ground_truth"]
+            ground_truth = torch.from_numpy(np.asarray(truth, dtype=np.float32)).to(self.device)
         return Decision(
-            inputs, newest, episode_step.clone(), record, actions, log_probs, values, next_state
+            inputs, newest, episode_step.clone(), record, actions, log_probs, values, next_state, ground_truth
         )  # fmt: skip
 
     def advance(self, decision: Decision) -> Outcome:

@@ -4,9 +4,10 @@ Step t of worker w holds what the policy saw and did there: its inputs (observat
 HELM branch's cached output), the memory's record of that step (:mod:`agents.memory`: for a recurrent memory the
 state fed *into* that step, the start state of any sequence beginning there; for a transformer the step's layer
 inputs), the sampled actions with their log-probs, the value estimate, the reward received and whether the action
-ended the episode. A memory with a ``history`` of h records also has the h records its slots carried into the
-rollout before step 0 (:meth:`RolloutBuffer.begin`), and :meth:`RolloutBuffer.memory_records` gives each sequence
-of a minibatch the h records before its start and its own, (S, h + P, ...): one copy per sequence, none per step.
+ended the episode, and with an auxiliary ground-truth loss the environment's ground truth at that step. A memory
+with a ``history`` of h records also has the h records its slots carried into the rollout before step 0
+(:meth:`RolloutBuffer.begin`), and :meth:`RolloutBuffer.memory_records` gives each sequence of a minibatch the h
+records before its start and its own, (S, h + P, ...): one copy per sequence, none per step.
 
 Frame stacks are not stored k times. The observation fields (``image``, ``vector``) keep one observation per step,
 after ``k - 1`` observations from before the rollout (what the policy's stack held at its start), and each step
@@ -40,10 +41,12 @@ class RolloutBuffer:
         frame_stack: int = 1,
         memory_history: int | None = None,
         record_dtype: torch.dtype = torch.float32,
+        ground_truth_size: int = 0,
     ) -> None:
         """``inputs``: the model's inputs (stacked shapes); ``state_shape``: the shape of the memory's per-step record
         (a recurrent memory's state); ``frame_stack``: k, the observations per stack; ``memory_history``,
-        ``record_dtype``: the memory's ``history`` and the dtype of its records."""
+        ``record_dtype``: the memory's ``history`` and the dtype of its records; ``ground_truth_size``: G, the size
+        of each step's ground-truth target (``ground_truth``, (workers, steps, G) float32; None when 0)."""
         self.workers, self.steps, self.device = workers, steps, torch.device(device)
         self.frame_stack = k = frame_stack
         self.memory_history = memory_history
@@ -68,6 +71,7 @@ class RolloutBuffer:
         self.terminated = zeros(dtype=torch.bool)
         self.advantages = zeros()
         self.returns = zeros()
+        self.ground_truth = zeros(ground_truth_size) if ground_truth_size else None
 
     @property
     def size(self) -> int:

@@ -37,10 +37,30 @@ class DamagedCheckpoint(ValueError):
     """A checkpoint file is truncated, corrupted or not a checkpoint (the message names it); it is never loaded."""
 
 
+def ground_truth_size(config: Config, core: Any) -> int:
+    """The size of the targets of ``ppo.ground_truth_coef`` in ``core`` (its ``ground_truth_space``), 0 when the
+    coefficient is 0; a ValueError naming the key when the environment has no ground truth in its infos."""
+    if config.ppo.ground_truth_coef == 0:
+        return 0
+    space = getattr(core, "ground_truth_space", None) if getattr(core, "has_ground_truth_info", False) else None
+    if space is None:
+        raise ValueError(
+            f"ppo.ground_truth_coef={config.ppo.ground_truth_coef:g} needs an environment with info['ground_truth'] "
+            f"(has_ground_truth_info), and {config.env.id} has none: use an endless id (Endless-MortarMayhem-v0, "
+            "Endless-MysteryPath-v0, Endless-SearingSpotlights-v0) or set ppo.ground_truth_coef=0"
+        )
+    return int(space.shape[0])
+
+
 def build_agent(
-    config: Config, observation_space: gym.Space, action_space: gym.Space, device: torch.device | str = "cpu"
+    config: Config,
+    observation_space: gym.Space,
+    action_space: gym.Space,
+    device: torch.device | str = "cpu",
+    ground_truth: int = 0,
 ) -> tuple[ActorCritic, Any]:
-    """The trainable model and the frozen HELM branch (None without one) of ``config``, on ``device``."""
+    """The trainable model and the frozen HELM branch (None without one) of ``config``, on ``device``;
+    ``ground_truth``: the size of the environment's ground truth (:func:`ground_truth_size`)."""
     helm = None
     if config.model.helm.enabled:
         from agents.helm import HelmBranch
@@ -60,8 +80,8 @@ def build_agent(
         ).to(device)
     helm_size = 0 if helm is None else helm.output_size
     reconstruction = config.ppo.reconstruction_coef > 0
-    model = ActorCritic(observation_space, action_space, config.model, helm_size, reconstruction).to(device)
-    return model, helm
+    model = ActorCritic(observation_space, action_space, config.model, helm_size, reconstruction, ground_truth)
+    return model.to(device), helm
 
 
 def check_helm(helm: Any, state: dict[str, Any], path: str | Path) -> None:
@@ -272,7 +292,8 @@ def load_policy(
     state = read_checkpoint(path)
     check_checkpoint_config(state, config, path)
     spec_core = config.env.make_core(1)
-    model, helm = build_agent(config, spec_core.single_observation_space, spec_core.single_action_space, device)
+    spaces = spec_core.single_observation_space, spec_core.single_action_space
+    model, helm = build_agent(config, *spaces, device, ground_truth_size(config, spec_core))
     check_helm(helm, state, path)
     model.load_state_dict(state["model"])
     model.eval()

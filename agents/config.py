@@ -324,6 +324,12 @@ class PPOConfig:
         "the newest frame / 255; the JMLR TrXL runs use 0.1 on some tasks); 0: no decoder",
         low=0.0,
     )
+    ground_truth_coef: float = param(
+        0.0,
+        "weight of the ground-truth estimation loss (an MLP head from the memory output, mean squared error against "
+        "the environment's info['ground_truth'] of each step; endless Memory Gym ids only); 0: no head",
+        low=0.0,
+    )
 
 
 WANDB_MODES = ("online", "offline", "disabled")

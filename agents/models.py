@@ -12,7 +12,9 @@ stacking the image (and vector) input holds the last k observations along the ch
 cached output (:mod:`agents.helm`) joins the CNN features. Non-memory layers always see a flat batch of real steps;
 only the memory module sees the (sequences, length) layout, which it takes from the padding mask of the minibatch.
 This module does not know which memory it holds: the model passes the memory's state, records and each step's
-``episode_step`` through.
+``episode_step`` through. Two optional heads read the memory output and are trained only through their own losses
+(:meth:`ActorCritic.evaluate`): the observation decoder (``ppo.reconstruction_coef``) and the ground-truth estimator
+(``ppo.ground_truth_coef``); acting never runs them.
 
 Initialisation, as in the authors' code: orthogonal weights with gain sqrt(2) for hidden and recurrent layers, 0.1
 for the policy heads, 1 for the value head; convolution and linear biases keep PyTorch's default (uniform) init, and
@@ -220,10 +222,13 @@ class ActorCritic(nn.Module):
         config: ModelConfig,
         helm_size: int = 0,
         reconstruction: bool = False,
+        ground_truth_size: int = 0,
     ) -> None:
         """``helm_size``: width of the HELM branch's output (0: no branch); the branch itself is frozen and lives
         with the actor, which caches its outputs as the ``helm`` input. ``reconstruction``: add the observation
-        decoder (``ppo.reconstruction_coef`` > 0), trained only through its loss."""
+        decoder (``ppo.reconstruction_coef`` > 0), trained only through its loss. ``ground_truth_size``: add the
+        ground-truth estimator (``ppo.ground_truth_coef`` > 0) for targets of that size, trained only through its
+        loss (0: none)."""
         super().__init__()
         self.action_dims = action_branches(action_space)
         self.inputs = model_inputs(observation_space, action_space, config, helm_size)
@@ -265,6 +270,14 @@ class ActorCritic(nn.Module):
         if reconstruction:
             frame_shape = observation_fields(observation_space, config.grayscale)["image"].shape
             self.decoder = ObservationDecoder(self.memory.output_size, frame_shape)  # type: ignore[arg-type]
+        self.ground_truth_size = ground_truth_size
+        self.ground_truth_head = None
+        if ground_truth_size:  # the JMLR endless TrXL's auxiliary head: memory output -> hidden -> the targets
+            self.ground_truth_head = nn.Sequential(
+                orthogonal(nn.Linear(self.memory.output_size, hidden), HIDDEN_GAIN),
+                nn.ReLU(),
+                orthogonal(nn.Linear(hidden, ground_truth_size), 1.0),
+            )
         self.weights_generation = 0  # changes of the weights (agents.actor.refresh_copy): older acting caches are stale
 
     @property
@@ -324,11 +337,14 @@ class ActorCritic(nn.Module):
         mask: Tensor,
         episode_step: Tensor | None = None,
         reconstruct: bool = False,
-    ) -> tuple[list[Tensor], Tensor] | tuple[list[Tensor], Tensor, Tensor]:
+        ground_truth: Tensor | None = None,
+    ) -> tuple[list[Tensor], Tensor, dict[str, Tensor]]:
         """Training: the N real steps of S sequences (flat, in sequence order), the memory records the buffer
         gathered for them (:meth:`agents.buffer.RolloutBuffer.memory_records`: a recurrent memory's start states
         (S, ...)), their padding mask (S, P) and each step's ``episode_step`` (N,). Returns logits and values of the N
-        steps, and with ``reconstruct`` the observation-reconstruction loss of those steps too.
+        steps and the auxiliary losses asked for, by their logged names: with ``reconstruct`` the
+        observation-reconstruction loss of those steps (``reconstruction_loss``), with ``ground_truth`` (N, G), the
+        targets of those steps, the ground-truth estimator's mean squared error (``ground_truth_loss``).
 
         ``inputs`` may hold filler rows after the N real ones (see :func:`agents.ppo.filled_index`): they pass
         through the layers that act on single steps, so those keep a few fixed shapes, but they never enter the
@@ -340,10 +356,15 @@ class ActorCritic(nn.Module):
             output = torch.cat((output, output.new_zeros(features.shape[0] - real_steps, *output.shape[1:])))
         logits, values = self.heads(output)
         logits, values = [branch[:real_steps] for branch in logits], values[:real_steps]
-        if reconstruct:  # also the observation-reconstruction loss of the real steps (a model with a decoder)
+        auxiliary: dict[str, Tensor] = {}
+        if reconstruct:  # the observation-reconstruction loss of the real steps (a model with a decoder)
             assert self.decoder is not None, "reconstruct needs a model built with reconstruction=True"
-            return logits, values, self.decoder.loss(output[:real_steps], inputs["image"][:real_steps])
-        return logits, values
+            auxiliary["reconstruction_loss"] = self.decoder.loss(output[:real_steps], inputs["image"][:real_steps])
+        if ground_truth is not None:  # the ground-truth estimator's error on the real steps
+            assert self.ground_truth_head is not None, "ground_truth needs a model built with ground_truth_size > 0"
+            estimate = self.ground_truth_head(output[:real_steps]).float()
+            auxiliary["ground_truth_loss"] = F.mse_loss(estimate, ground_truth.to(estimate.dtype))
+        return logits, values, auxiliary
 
 
 # --------------------------------------------------------------------------------------- action distribution

@@ -79,6 +79,7 @@ METHOD_LABELS = {  # the paper's names of the agents, keyed by the method names 
     "trxl": "TrXL-PPO",
     "gtrxl": "GTrXL-PPO",
     "trxl_recon": "TrXL-PPO + recon.",  # observation reconstruction (ppo.reconstruction_coef)
+    "trxl_gt": "TrXL-PPO + GT",  # ground-truth estimation (ppo.ground_truth_coef)
     "lru": "LRU-PPO",
     "ffm": "FFM-PPO",
     "mamba": "Mamba-PPO",

@@ -110,6 +110,9 @@ def ppo_update(
     old_values, returns = buffer.flat(buffer.values), buffer.flat(buffer.returns)
     advantages = buffer.flat(buffer.advantages)
     reconstruct = config.reconstruction_coef > 0
+    # the auxiliary losses by their logged names, with their weights (agents.models.ActorCritic.evaluate)
+    auxiliary_coefs = {"reconstruction_loss": config.reconstruction_coef, "ground_truth_loss": config.ground_truth_coef}
+    ground_truth = None if buffer.ground_truth is None else buffer.flat(buffer.ground_truth)
     if config.advantage_normalization == "batch":
         advantages = normalize(advantages)
     totals: dict[str, Tensor | float] = {}
@@ -120,14 +123,14 @@ def ppo_update(
             index = batch.step_index
             with autocast():
                 filled = filled_index(index)
-                outputs = model.evaluate(
+                logits, values, auxiliary = model.evaluate(
                     buffer.gather(filled),
                     buffer.memory_records(batch.start_index, batch.mask.shape[1]),
                     batch.mask,
                     rows(episode_steps, index),
                     reconstruct,
+                    None if ground_truth is None else rows(ground_truth, index),
                 )
-            logits, values = outputs[0], outputs[1]
             log_probs, entropy = log_probs_and_entropy(logits, rows(actions, index))
             minibatch_advantages = rows(advantages, index)
             if config.advantage_normalization == "minibatch":
@@ -146,8 +149,8 @@ def ppo_update(
                 entropy_coef,
             )
             total = loss.total
-            if reconstruct:
-                total = total + config.reconstruction_coef * outputs[2]
+            for name, value in auxiliary.items():
+                total = total + auxiliary_coefs[name] * value
             optimizer.zero_grad(set_to_none=True)
             total.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(model.parameters(), config.max_grad_norm, foreach=True)
@@ -162,8 +165,7 @@ def ppo_update(
                 "clipfrac": loss.clipfrac,
                 "grad_norm": grad_norm,
             }
-            if reconstruct:
-                terms["reconstruction_loss"] = outputs[2]
+            terms.update(auxiliary)
             for name, value in terms.items():
                 totals[name] = totals.get(name, 0.0) + value.detach() * batch.num_steps
             steps_seen += batch.num_steps

@@ -56,6 +56,7 @@ from agents.checkpoint import (
     checkpoint_damage,
     checkpoint_update,
     finished_update,
+    ground_truth_size,
     latest_checkpoint,
     run_config,
 )
@@ -827,7 +828,7 @@ def parameter_count(config: Config) -> int:
     reconstruction = config.ppo.reconstruction_coef > 0  # the decoder is trained, so it counts
     env = config.env  # what decides the spaces
     settings = [env.id, env.options, env.make_kwargs, env.wrappers, env.image_layout, config_to_dict(config.model)]
-    settings.append(reconstruction)
+    settings += [reconstruction, config.ppo.ground_truth_coef > 0]
     key = json.dumps(settings, sort_keys=True, default=str)
     if key not in _PARAMETERS:
         import torch
@@ -835,10 +836,11 @@ def parameter_count(config: Config) -> int:
         from agents.models import ActorCritic
 
         core = config.env.make_core(1)
+        ground_truth = ground_truth_size(config, core)  # the estimator is trained, so it counts
         helm = _helm_width(config) if config.model.helm.enabled else 0
         with torch.device("meta"):  # shapes only: no memory, no initialisation cost
             spaces = core.single_observation_space, core.single_action_space
-            model = ActorCritic(*spaces, config.model, helm, reconstruction)
+            model = ActorCritic(*spaces, config.model, helm, reconstruction, ground_truth)
         _PARAMETERS[key] = sum(p.numel() for p in model.parameters() if p.requires_grad)
     return _PARAMETERS[key]
 

@@ -53,6 +53,7 @@ from agents.checkpoint import (
     check_helm,
     checkpoint_path,
     checkpoint_update,
+    ground_truth_size,
     intact_checkpoint,
     latest_checkpoint,
     read_checkpoint,
@@ -122,7 +123,7 @@ class Trainer:
         workers = config.run.workers
         self.core = config.env.make_core(workers)
         spaces = self.core.single_observation_space, self.core.single_action_space
-        self.model, self.helm = build_agent(config, *spaces, self.device)
+        self.model, self.helm = build_agent(config, *spaces, self.device, ground_truth_size(config, self.core))
         self.rollout_model = rollout_copy(self.model, config.run.precision)
         # The fused kernel updates all parameters at once: ~10x faster than the per-tensor loop on CPU.
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.ppo.learning_rate.initial, fused=True)
@@ -136,6 +137,7 @@ class Trainer:
             config.model.frame_stack,
             self.model.memory.history,
             self.model.memory.state_dtype,
+            self.model.ground_truth_size,
         )
         self.actor = Actor(self.core, self.rollout_model, config, self.action_generator, self.helm, self.device)
         self.actor.start(self._episode_seeds(workers), seed_source=self._episode_seeds)
@@ -380,6 +382,8 @@ class Trainer:
             buffer.actions[:, t] = decision.actions
             buffer.log_probs[:, t] = decision.log_probs
             buffer.values[:, t] = decision.values
+            if buffer.ground_truth is not None:
+                buffer.ground_truth[:, t] = decision.ground_truth
             outcome = actor.advance(decision)
             buffer.rewards[:, t] = outcome.rewards
             buffer.terminated[:, t] = outcome.terminated

@@ -133,7 +133,7 @@ def network_bound(trainer: Trainer) -> float:
     for minibatches in epochs:
         for gathered, records, mask, steps, minibatch_actions in minibatches:
             with trainer.autocast():
-                logits, values = model.evaluate(gathered, records, mask, steps)
+                logits, values, _ = model.evaluate(gathered, records, mask, steps)
             log_probs, entropy = log_probs_and_entropy(logits, minibatch_actions)
             (log_probs.mean() + entropy.mean() + values.square().mean()).backward()
     if buffer.device.type == "cuda":  # the kernels queued must have run

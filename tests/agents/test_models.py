@@ -148,7 +148,7 @@ def test_sequences_reproduce_step_by_step_outputs(memory: str, max_length: int |
     sequences = split_sequences(terminated, max_length)
     batch = pad_sequences(sequences, np.random.default_rng(0).permutation(len(sequences)))
     with torch.no_grad():
-        logits, values = model.evaluate(
+        logits, values, _ = model.evaluate(
             {k: v[batch.step_index] for k, v in inputs.items()}, flat_states[batch.start_index], batch.mask
         )
     torch.testing.assert_close(values, flat_values[batch.step_index], atol=1e-5, rtol=1e-5)
@@ -173,7 +173,7 @@ def test_padding_changes_no_output_and_no_gradient(memory: str) -> None:
     def loss_and_grads(pad_to: int | None) -> tuple[torch.Tensor, list[torch.Tensor]]:
         batch = pad_sequences(sequences, ids, pad_to=pad_to)
         model.zero_grad()
-        logits, values = model.evaluate(
+        logits, values, _ = model.evaluate(
             {k: v[batch.step_index] for k, v in inputs.items()}, states[batch.start_index], batch.mask
         )
         loss = values.square().mean() + sum(x.logsumexp(-1).mean() for x in logits)
@@ -198,7 +198,8 @@ def test_filler_rows_change_no_output_and_no_gradient(memory: str) -> None:
 
     def run(index: torch.Tensor) -> tuple[list[torch.Tensor], torch.Tensor, list[torch.Tensor]]:
         model.zero_grad()
-        logits, values = model.evaluate({k: v[index] for k, v in inputs.items()}, states[batch.start_index], batch.mask)
+        selected = {k: v[index] for k, v in inputs.items()}
+        logits, values, _ = model.evaluate(selected, states[batch.start_index], batch.mask)
         (values.square().mean() + sum(x.logsumexp(-1).mean() for x in logits)).backward()
         return logits, values, [p.grad.clone() for p in model.parameters()]
 
@@ -289,7 +290,9 @@ def test_the_observation_decoder_mirrors_the_encoder_and_its_loss_reaches_the_me
     assert ActorCritic(space, gym.spaces.Discrete(3), config).decoder is None
     inputs = {"image": torch.randint(0, 256, (6, side, side, 6), dtype=torch.uint8)}
     mask = torch.tensor([[True, True, True, True], [True, True, False, False]])
-    logits, values, loss = model.evaluate(inputs, torch.zeros(2, 1, 16), mask, None, reconstruct=True)
+    logits, values, auxiliary = model.evaluate(inputs, torch.zeros(2, 1, 16), mask, None, reconstruct=True)
+    assert list(auxiliary) == ["reconstruction_loss"]
+    loss = auxiliary["reconstruction_loss"]
     output = model.memory.sequences(model.encode(inputs), torch.zeros(2, 1, 16), mask)
     assert model.decoder(output).shape == (6, side, side, 3)
     expected = torch.nn.functional.binary_cross_entropy_with_logits(

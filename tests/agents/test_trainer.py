@@ -299,7 +299,7 @@ def test_rollout_bookkeeping(tmp_path: Path, dict_env: str) -> None:
         batch = pad_sequences(sequences, np.arange(len(sequences)))
         inputs = buffer.gather(batch.step_index)
         with torch.no_grad():
-            logits, values = trainer.model.evaluate(
+            logits, values, _ = trainer.model.evaluate(
                 inputs, buffer.flat(buffer.memory_states)[batch.start_index], batch.mask
             )
         log_probs, _ = log_probs_and_entropy(logits, buffer.flat(buffer.actions)[batch.step_index])
@@ -399,7 +399,7 @@ def test_bf16_acts_with_a_bfloat16_copy_of_the_weights(tmp_path: Path, dict_env:
     batch = pad_sequences(sequences, np.arange(len(sequences)))
     inputs = buffer.gather(batch.step_index)
     with torch.no_grad(), trainer.autocast():
-        logits, values = trainer.model.evaluate(
+        logits, values, _ = trainer.model.evaluate(
             inputs, buffer.flat(buffer.memory_states)[batch.start_index], batch.mask
         )
     log_probs, _ = log_probs_and_entropy(logits, buffer.flat(buffer.actions)[batch.step_index])
