@@ -77,6 +77,7 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         ("model.memory=mamba", "ppo.sequence_length=3", "model.mamba.state_size=4", "run.precision=bf16"),
         ("model.memory=mamba2", "model.mamba2.head_dim=16", "model.mamba2.chunk_size=4", "run.precision=bf16"),
         ("model.memory=tests.support.external_memory:LeakyMemory", "model.memory_options={leak: 0.5}"),
+        ("model.memory=gru", "env.id=Endless-MortarMayhem-v0", "env.options={}", "ppo.ground_truth_coef=0.5"),
     ],
     ids=[
         "gru-max",
@@ -91,6 +92,7 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         "mamba-3-bf16",
         "mamba2-chunks4-bf16",
         "external-memory",
+        "gru-ground-truth",
     ],
 )
 def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overrides: tuple[str, ...]) -> None:
