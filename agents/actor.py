@@ -108,8 +108,12 @@ class Actor:
         generator: torch.Generator,
         helm: Any = None,
         device: torch.device | str = "cpu",
+        ground_truth: bool = False,
     ) -> None:
+        """``ground_truth``: every decision also carries the environment's ``info['ground_truth']`` of its inputs
+        (the targets of ``ppo.ground_truth_coef``, which training needs and evaluation does not)."""
         self.core, self.model, self.config = core, model, config
+        self.ground_truth = ground_truth
         self.generator, self.helm, self.device = generator, helm, torch.device(device)
         self.num_envs = core.num_envs
         self.frame_skip = config.env.frame_skip
@@ -165,7 +169,7 @@ class Actor:
                 newest[name] = inputs[name]
         record = self.model.memory.record(state, next_state)
         ground_truth = None
-        if self.model.ground_truth_size:  # the targets of the auxiliary loss: what the environment is at these inputs
+        if self.ground_truth:  # the targets of the auxiliary loss: what the environment is at these inputs
             truth = self.core.step_infos()["ground_truth"]
             ground_truth = torch.from_numpy(np.asarray(truth, dtype=np.float32)).to(self.device)
         return Decision(

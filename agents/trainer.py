@@ -139,7 +139,15 @@ class Trainer:
             self.model.memory.state_dtype,
             self.model.ground_truth_size,
         )
-        self.actor = Actor(self.core, self.rollout_model, config, self.action_generator, self.helm, self.device)
+        self.actor = Actor(
+            self.core,
+            self.rollout_model,
+            config,
+            self.action_generator,
+            self.helm,
+            self.device,
+            ground_truth=self.buffer.ground_truth is not None,
+        )
         self.actor.start(self._episode_seeds(workers), seed_source=self._episode_seeds)
         self.recent_returns: deque[float] = deque(maxlen=RECENT_EPISODES)
         self.history: list[dict[str, float]] = []

@@ -52,7 +52,8 @@ def test_each_decision_carries_the_ground_truth_of_the_observation_it_acts_on(en
     size = ground_truth_size(config, core)
     assert size == core.ground_truth_space.shape[0]
     model, _ = build_agent(config, *spaces, ground_truth=size)
-    actor = Actor(core, model, config, torch.Generator().manual_seed(0))
+    assert Actor(core, model, config, torch.Generator()).decide().ground_truth is None  # evaluation: no targets
+    actor = Actor(core, model, config, torch.Generator().manual_seed(0), ground_truth=True)
     counter = iter(range(10**6))
     actor.start([next(counter) for _ in range(3)], seed_source=lambda n: [next(counter) for _ in range(n)])
     reference = gym.make(env_id)
