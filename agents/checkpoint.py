@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import torch
 import yaml
 
@@ -52,15 +51,10 @@ def ground_truth_size(config: Config, core: Any) -> int:
     return int(space.shape[0])
 
 
-def build_agent(
-    config: Config,
-    observation_space: gym.Space,
-    action_space: gym.Space,
-    device: torch.device | str = "cpu",
-    ground_truth: int = 0,
-) -> tuple[ActorCritic, Any]:
-    """The trainable model and the frozen HELM branch (None without one) of ``config``, on ``device``;
-    ``ground_truth``: the size of the environment's ground truth (:func:`ground_truth_size`)."""
+def build_agent(config: Config, core: Any, device: torch.device | str = "cpu") -> tuple[ActorCritic, Any]:
+    """The trainable model and the frozen HELM branch (None without one) of ``config``, on ``device``, for the
+    environment of ``core`` (its spaces, and its ground truth with ``ppo.ground_truth_coef``)."""
+    observation_space, action_space = core.single_observation_space, core.single_action_space
     helm = None
     if config.model.helm.enabled:
         from agents.helm import HelmBranch
@@ -80,6 +74,7 @@ def build_agent(
         ).to(device)
     helm_size = 0 if helm is None else helm.output_size
     reconstruction = config.ppo.reconstruction_coef > 0
+    ground_truth = ground_truth_size(config, core)
     model = ActorCritic(observation_space, action_space, config.model, helm_size, reconstruction, ground_truth)
     return model.to(device), helm
 
@@ -291,9 +286,7 @@ def load_policy(
         raise FileNotFoundError(f"{run_dir} holds no checkpoint (checkpoints/{CHECKPOINT_GLOB})")
     state = read_checkpoint(path)
     check_checkpoint_config(state, config, path)
-    spec_core = config.env.make_core(1)
-    spaces = spec_core.single_observation_space, spec_core.single_action_space
-    model, helm = build_agent(config, *spaces, device, ground_truth_size(config, spec_core))
+    model, helm = build_agent(config, config.env.make_core(1), device)
     check_helm(helm, state, path)
     model.load_state_dict(state["model"])
     model.eval()

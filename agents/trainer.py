@@ -53,7 +53,6 @@ from agents.checkpoint import (
     check_helm,
     checkpoint_path,
     checkpoint_update,
-    ground_truth_size,
     intact_checkpoint,
     latest_checkpoint,
     read_checkpoint,
@@ -122,8 +121,7 @@ class Trainer:
 
         workers = config.run.workers
         self.core = config.env.make_core(workers)
-        spaces = self.core.single_observation_space, self.core.single_action_space
-        self.model, self.helm = build_agent(config, *spaces, self.device, ground_truth_size(config, self.core))
+        self.model, self.helm = build_agent(config, self.core, self.device)
         self.rollout_model = rollout_copy(self.model, config.run.precision)
         # The fused kernel updates all parameters at once: ~10x faster than the per-tensor loop on CPU.
         self.optimizer = torch.optim.AdamW(self.model.parameters(), lr=config.ppo.learning_rate.initial, fused=True)

@@ -27,7 +27,7 @@ def _config(env_id: str, *overrides: str):
 
 def _actor(config, seeds_from: int = 0) -> Actor:
     core = envs.make_core(config.env.id, config.run.workers, config.env.options)
-    model, helm = build_agent(config, core.single_observation_space, core.single_action_space)
+    model, helm = build_agent(config, core)
     generator = torch.Generator().manual_seed(0)
     actor = Actor(core, model, config, generator, helm)
     counter = iter(range(seeds_from, 10**6))

@@ -48,10 +48,10 @@ def test_each_decision_carries_the_ground_truth_of_the_observation_it_acts_on(en
     policy saw, across episode starts too."""
     config = _config(env_id, "run.workers=3")
     core = envs.make_core(env_id, 3)
-    spaces = core.single_observation_space, core.single_action_space
     size = ground_truth_size(config, core)
     assert size == core.ground_truth_space.shape[0]
-    model, _ = build_agent(config, *spaces, ground_truth=size)
+    model, _ = build_agent(config, core)
+    assert model.ground_truth_size == size
     assert Actor(core, model, config, torch.Generator()).decide().ground_truth is None  # evaluation: no targets
     actor = Actor(core, model, config, torch.Generator().manual_seed(0), ground_truth=True)
     counter = iter(range(10**6))
