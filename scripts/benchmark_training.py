@@ -5,8 +5,9 @@
         [--methods gru,ppo,stack4,stack16,helm] [--sb3 auto]
     python scripts/benchmark_training.py --env MortarMayhem-Grid-v0 --precision fp32 --methods gru,trxl,gtrxl --sb3 no
         [--threads 1 --out results/benchmarks/training_trxl.json]  (--threads 0: training_trxl_2threads.json)
-    python scripts/benchmark_training.py --precision fp32 --methods gru,lru,ffm,mamba --sb3 no
+    python scripts/benchmark_training.py --precision fp32 --methods gru,lru,ffm,mamba,mamba2 --sb3 no
         [--threads 0 --updates 2 --repeats 3 --out results/benchmarks/training_scan_memories_2threads.json]
+        (--threads 1 --updates 2 --repeats 1: training_scan_memories.json)
 
 * end to end, per method (configs/mortar_mayhem_b_grid/<method>.yaml at the benchmark's batch): ``train_update()``
   (rollout in the batched env, GAE, sequence splitting, PPO epochs with optimizer steps), env steps per second, with
@@ -32,7 +33,7 @@ Prints a table and writes the record atomically (with versions, git revision, ma
 ``runs/benchmarks/training.json`` (git-ignored) unless ``--out`` names another file. The committed table is replaced
 only where ``--out`` names it (``--out results/benchmarks/training.json``), and a partial run (some of the methods,
 or no SB3 measurement) never replaces a full table, wherever it is: the Transformer-XL table (fp32, MM Grid) is
-committed beside it, as ``results/benchmarks/training_trxl.json`` (one thread, loaded machine) and
+committed beside it, as ``results/benchmarks/training_trxl.json`` (one thread) and
 ``training_trxl_2threads.json`` (both cores, unloaded: the setting of the CleanRL figure it is compared with).
 """
 
