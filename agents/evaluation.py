@@ -37,7 +37,15 @@ from agents.io import (
 from agents.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
 from agents.models import ActorCritic
 from agents.preemption import deferred_signals
-from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS, config_digest, env_options_text, read_episodes
+from agents.results import (
+    EPISODE_COLUMNS,
+    TRAINING_COLUMNS,
+    config_digest,
+    describe_differences,
+    env_options_text,
+    experiment_settings,
+    read_episodes,
+)
 from agents.results import summarize as summarize_episodes
 
 RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
@@ -249,6 +257,20 @@ def select_checkpoints(run_dir: Path, which: str, batch_size: int) -> list[Path]
     return chosen
 
 
+def pruned_note(config: Config, found: Sequence[Path]) -> str:
+    """What ``--checkpoints all`` should say of a run's ``found`` checkpoints: how many there are, and, when the run
+    wrote earlier ones that ``run.keep_checkpoints`` deleted, that they were pruned (their novel-seed points are in
+    the run's ``eval/episodes.csv`` when ``eval.interval`` was set)."""
+    note = f" ({len(found)} found"
+    interval, keep = config.run.checkpoint_interval, config.run.keep_checkpoints
+    if keep and len(found) >= keep and interval and checkpoint_update(found[0]) > interval:
+        note += (
+            f"; the older ones were pruned by run.keep_checkpoints: {keep}, which keeps only the newest; "
+            "train with --set run.keep_checkpoints=0 to keep all"
+        )
+    return note + ")"
+
+
 def unique_run_names(
     directories: Sequence[Path],
     groups: Sequence[tuple[str, str]],
@@ -441,6 +463,7 @@ def evaluate_runs(
                 select_checkpoints(directory, checkpoints, config.batch_size),
             )
         )
+    _check_cells(out, plans, [], {}, greedy)  # among themselves, before out is created
     with exclusive_lock(out / LOCK_FILE):  # another evaluation into out may be writing: read between its writes
         old_records, old_summary = _existing(out)
     taken = _taken(old_summary)
@@ -449,6 +472,7 @@ def evaluate_runs(
         plan.name = name
     planned = set().union(*(plan.keys() for plan in plans))
     _check_clashes(out, old_records, planned, force)
+    _check_cells(out, plans, old_records, taken, greedy)
 
     stems = [plan.name.replace("/", "-") for plan in plans]  # GIF names, unique among this evaluation's runs
     stems = [f"{p.method}-{p.task}-{s}" if stems.count(s) > 1 else s for p, s in zip(plans, stems, strict=True)]
@@ -458,6 +482,7 @@ def evaluate_runs(
         say(
             f"run {plan.name} ({plan.directory}): {describe_seeds(plan.seeds)} x {plan.repetitions} repetitions, "
             f"checkpoint(s) at step(s) {', '.join(map(str, plan.steps))}"
+            + (pruned_note(plan.config, plan.checkpoints) if checkpoints == "all" else "")
         )
         for path in plan.checkpoints:
             policy = load_policy(plan.directory, path, device)
@@ -499,6 +524,94 @@ def evaluate_runs(
     # Merged into what out holds now, under its lock: an evaluation that wrote there meanwhile keeps its records
     with exclusive_lock(out / LOCK_FILE):
         return _merge_into(out, plans, records, training, force, say, evaluation)
+
+
+@dataclass(frozen=True)
+class _Member:
+    """One run of a (method, task) cell as the pre-evaluation check sees it: its directory, saved config (None when
+    that is not found) and config digest."""
+
+    directory: str
+    config: Config | None
+    digest: str
+
+
+def _cell_members(
+    plans: Sequence[_Plan],
+    old_records: Sequence[dict[str, Any]],
+    taken: Mapping[tuple[str, str, str], str],
+    greedy: bool,
+) -> dict[tuple[str, str], list[_Member]]:
+    """Every run a results directory will hold after this evaluation, by (method, task): the planned runs and those it
+    holds already (their digest from their latest records, their config from their directory where it still exists)."""
+    cells: dict[tuple[str, str], dict[str, _Member]] = {}
+    for plan in plans:
+        directory = str(plan.directory.resolve())
+        member = _Member(directory, plan.config, config_digest(plan.config, greedy))
+        cells.setdefault((plan.method, plan.task), {})[directory] = member
+    latest: dict[tuple[str, str, str], tuple[int, str]] = {}
+    for record in old_records:
+        digest = str(record.get("config_digest") or "")
+        key = (str(record["method"]), str(record["task"]), str(record["run"]))
+        if digest and (key not in latest or int(record["step"]) >= latest[key][0]):
+            latest[key] = (int(record["step"]), digest)
+    for (method, task, name), (_, digest) in latest.items():
+        directory = taken.get((method, task, name), name)
+        members = cells.setdefault((method, task), {})
+        if directory not in members:  # a planned run supersedes its own earlier records
+            path = Path(directory) / "config.yaml"
+            config = run_config(directory) if path.is_file() else None
+            members[directory] = _Member(directory, config, digest)
+    return {cell: list(members.values()) for cell, members in cells.items()}
+
+
+def _check_cells(
+    out: Path,
+    plans: Sequence[_Plan],
+    old_records: Sequence[dict[str, Any]],
+    taken: Mapping[tuple[str, str, str], str],
+    greedy: bool,
+) -> None:
+    """Before anything is evaluated: the runs of one (method, task) cell in ``out`` must be seeds of one experiment
+    (one config digest), and two directories with the same seed and digest are one run trained twice, which would
+    count twice in every interval. Either is refused, naming the directories (and the keys that differ)."""
+    for (method, task), members in _cell_members(plans, old_records, taken, greedy).items():
+        digests = sorted({member.digest for member in members})
+        if len(digests) > 1:
+            groups = "; ".join(
+                f"{digest}: {', '.join(m.directory for m in members if m.digest == digest)}" for digest in digests
+            )
+            raise ValueError(
+                f"{out}: method {method!r}, task {task!r} would hold runs whose configs differ in more than the seed "
+                f"({groups}). {_config_differences(members)} Evaluate them into different --out directories, or "
+                "give them different --method/--task names"
+            )
+        by_seed: dict[int, list[str]] = {}
+        for member in members:
+            if member.config is not None:
+                by_seed.setdefault(member.config.run.seed, []).append(member.directory)
+        for seed, directories in sorted(by_seed.items()):
+            if len(directories) > 1:
+                raise ValueError(
+                    f"{out}: {' and '.join(directories)} are the same run (method {method!r}, task {task!r}, "
+                    f"run.seed {seed}, config_digest {digests[0]}): trained twice with one seed and config, they "
+                    "would count as two runs in every interval. Evaluate one of them, or train another seed "
+                    "(--set run.seed=N)"
+                )
+
+
+def _config_differences(members: Sequence[_Member]) -> str:
+    """The keys whose values differ between the runs' saved configs (one per digest), as a sentence."""
+    settings: dict[str, dict[str, Any]] = {}
+    seen: set[str] = set()
+    for member in members:
+        if member.digest in seen:
+            continue
+        if member.config is None:
+            return f"The config of {member.directory} was not found: compare the runs' config.yaml files."
+        seen.add(member.digest)
+        settings[member.directory] = experiment_settings(member.config, changed_only=False)
+    return describe_differences(settings)
 
 
 def _check_clashes(out: Path, old_records: Sequence[dict[str, Any]], planned: set[tuple], force: bool) -> None:
@@ -545,8 +658,9 @@ def _merge_into(
         write_records(Path(scratch) / "episodes.csv", merged)
         try:
             summary = summarize_episodes(read_episodes(scratch))
-        except ValueError as err:
-            raise ValueError(f"the records of {out} and of this evaluation do not fit together: {err}") from None
+        except ValueError as err:  # named after out, not after the scratch directory the check read
+            message = str(err).replace(str(scratch), str(out))
+            raise ValueError(f"the records of {out} and of this evaluation do not fit together: {message}") from None
     registry = {**taken, **{(p.method, p.task, p.name): str(p.directory.resolve()) for p in plans}}
     summary["run_directories"] = [
         {"method": key[0], "task": key[1], "run": key[2], "directory": path} for key, path in sorted(registry.items())

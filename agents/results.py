@@ -48,6 +48,7 @@ __all__ = [
     "aggregate",
     "check_configs",
     "config_digest",
+    "describe_differences",
     "env_options_text",
     "estimate",
     "experiment_settings",
@@ -387,6 +388,12 @@ def _differences(by_digest: Mapping[str, Sequence[str]], directories: Sequence[s
         if found is None:
             return "Their config.yaml files were not found next to the results: compare the runs' configs."
         settings[digest] = found
+    return describe_differences(settings)
+
+
+def describe_differences(settings: Mapping[str, Mapping[str, Any]]) -> str:
+    """The keys whose values differ between the :func:`experiment_settings` of several runs (``{where: settings}``,
+    ``where`` naming each in the sentence), as a sentence."""
     keys = sorted(set().union(*settings.values()))
     differing = [key for key in keys if len({json.dumps(s.get(key), sort_keys=True) for s in settings.values()}) > 1]
     if not differing:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -140,3 +141,59 @@ def test_a_run_without_its_config_is_refused(tmp_path: Path, capsys) -> None:
     assert "is not a run directory" in capsys.readouterr().err
     assert evaluate_script.main(["--run", str(tmp_path)]) == 2
     assert "holds no checkpoint" in capsys.readouterr().err
+
+
+def _copy_run(run_dir: Path, target: Path, **changes: object) -> Path:
+    """A copy of ``run_dir`` at ``target`` whose saved config has ``changes`` ({"section.key": value}) applied."""
+    shutil.copytree(run_dir, target)
+    config = yaml.safe_load((target / "config.yaml").read_text())
+    for dotted, value in changes.items():
+        section, key = dotted.split(".")
+        config[section][key] = value
+    (target / "config.yaml").write_text(yaml.safe_dump(config))
+    return target
+
+
+def test_the_same_run_trained_twice_is_one_run_not_two(run_dir: Path, tmp_path: Path, capsys) -> None:
+    """Two directories of one cell with the same seed and config are refused before anything is evaluated, naming
+    both, whether they come in one call or the second joins the first's results later."""
+    twin = _copy_run(run_dir, tmp_path / "later" / "tiny-seed1")
+    out = tmp_path / "both"
+    assert evaluate_script.main(["--run", str(run_dir), str(twin), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"{run_dir.resolve()} and {twin.resolve()} are the same run" in err and "run.seed 1" in err
+    assert not out.exists()
+    assert evaluate_script.main(["--run", str(run_dir), "--out", str(out), "--no-progress"]) == 0
+    capsys.readouterr()
+    assert evaluate_script.main(["--run", str(twin), "--out", str(out), "--no-progress"]) == 2
+    assert "are the same run" in capsys.readouterr().err
+
+
+def test_runs_with_different_configs_are_refused_before_evaluating(run_dir: Path, tmp_path: Path, capsys) -> None:
+    """The message names the runs' directories and the keys that differ (not a scratch directory), and comes before
+    any evaluation (no records are written)."""
+    other = _copy_run(run_dir, tmp_path / "other-seed2", **{"run.seed": 2, "ppo.gamma": 0.9})
+    out = tmp_path / "out"
+    assert evaluate_script.main(["--run", str(run_dir), str(other), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "differ in more than the seed" in err and str(run_dir.resolve()) in err and str(other.resolve()) in err
+    assert "Differing keys: ppo.gamma (0.99 in" in err and "0.9 in" in err
+    assert "episodes.csv of" not in err and "not found" not in err  # no scratch directory, both configs read
+    assert not out.exists()
+
+
+def test_all_checkpoints_says_how_many_and_that_older_ones_were_pruned(run_dir: Path, tmp_path: Path, capsys) -> None:
+    config = {**TINY, "run": {**TINY["run"], "total_steps": 4 * 8 * 6, "checkpoint_interval": 1, "keep_checkpoints": 2}}
+    directory = tmp_path / "pruned-seed1"
+    Trainer(config_from_dict({**config, "eval": {**TINY["eval"], "interval": 0}}), directory).train()
+    out = tmp_path / "e"
+    assert (
+        evaluate_script.main(["--run", str(directory), "--checkpoints", "all", "--out", str(out), "--no-progress"]) == 0
+    )
+    printed = capsys.readouterr().out
+    assert (
+        "checkpoint(s) at step(s) 160, 192 (2 found; the older ones were pruned by run.keep_checkpoints: 2" in printed
+    )
+    args = ["--run", str(run_dir), "--checkpoints", "all", "--out", str(tmp_path / "kept"), "--no-progress"]
+    assert evaluate_script.main(args) == 0  # keep_checkpoints: 0 kept every one
+    assert "checkpoint(s) at step(s) 64, 128 (2 found)" in capsys.readouterr().out
