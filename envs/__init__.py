@@ -76,10 +76,15 @@ def _register_all() -> None:
             entry_point="envs.core:MemoryGymEnv",
             vector_entry_point="envs.core:MemoryGymVectorEnv",
             kwargs={"core": core, **variant},
-            # gymnasium's passive checker is off by default: after a first reset that raised, gymnasium 1.4's
-            # PassiveEnvChecker fails every later step (it compares with the reset data it never got). The test
-            # suite runs gymnasium's full check_env on every id; disable_env_checker=False still turns it on.
+            # gymnasium.make returns the environment itself, without wrappers: gymnasium 1.x wrappers do not forward
+            # attributes, and clients written for memory-gym read max_episode_steps, has_ground_truth_info and
+            # ground_truth_space on what make returns. The environment refuses a step or a render before its first
+            # reset by itself (what OrderEnforcing checked). The passive checker would be off anyway: after a first
+            # reset that raised, gymnasium 1.4's PassiveEnvChecker fails every later step (it compares with the
+            # reset data it never got). The test suite runs gymnasium's full check_env on every id;
+            # gymnasium.make(id, disable_env_checker=False) still adds the checker (and hides the attributes).
             disable_env_checker=True,
+            order_enforce=False,
         )
 
 

@@ -475,6 +475,8 @@ class MemoryGymEnv(gym.Env):
         return obs[0]
 
     def render(self) -> np.ndarray | None:
+        if not self._was_reset:  # gymnasium.make adds no OrderEnforcing wrapper (envs._register_all): refuse here
+            raise ResetNeeded(f"{self.core.env_name} has nothing to render before its first reset: call reset first")
         if self.render_mode == "rgb_array":
             return self.core.agent_frame(0)
         if self.render_mode == "debug_rgb_array":
