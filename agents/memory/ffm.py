@@ -19,7 +19,7 @@ from torch import Tensor, nn
 
 from agents.config import FfmConfig
 from agents.layers import orthogonal
-from agents.memory.scan import Layout, ScanMemory, complex_dtype, widen
+from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
 
 
 class FFMBlock(nn.Module):
@@ -39,17 +39,19 @@ class FFMBlock(nn.Module):
         self.skip_gate = orthogonal(nn.Linear(dim, 2 * dim), 1.0)  # the skip path and the output gate
 
     def decay(self) -> Tensor:
-        """gamma (trace_size, context_size), complex, |gamma| <= 1."""
-        return torch.exp(torch.complex(-self.alpha.abs(), self.omega))
+        """gamma (trace_size, context_size), complex, |gamma| <= 1; complex64 also from the bfloat16 weights of a
+        bf16 acting copy (torch has no complex bfloat16)."""
+        return torch.exp(torch.complex(-widen(self.alpha).abs(), widen(self.omega)))
 
     def forward(self, x: Tensor, state: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
         u = self.norm(x)  # (N, dim)
         value, gate = widen(self.project(u)).chunk(2, dim=-1)
-        gated = value * torch.sigmoid(gate)  # (N, m)
-        inputs = gated.unsqueeze(-1).expand(*gated.shape, self.shape[1])  # (N, m, c)
-        start = torch.view_as_complex(widen(state).reshape(-1, *self.shape, 2).contiguous())
-        dtype = complex_dtype(value.dtype)
-        traces = torch.view_as_real(layout.scan(self.decay().to(dtype), inputs.to(dtype), start)).flatten(1)
+        with full_precision(value.device):  # the gate, the decays and the traces in fp32 (complex64) under bf16 too
+            gated = value * torch.sigmoid(gate)  # (N, m)
+            inputs = gated.unsqueeze(-1).expand(*gated.shape, self.shape[1])  # (N, m, c)
+            start = torch.view_as_complex(widen(state).reshape(-1, *self.shape, 2).contiguous())
+            dtype = complex_dtype(value.dtype)
+            traces = torch.view_as_real(layout.scan(self.decay().to(dtype), inputs.to(dtype), start)).flatten(1)
         z = self.mix(traces.to(x.dtype))
         skip, out_gate = self.skip_gate(u).chunk(2, dim=-1)
         out_gate = torch.sigmoid(out_gate)

@@ -18,7 +18,7 @@ from torch.nn import functional as F
 
 from agents.config import LruConfig
 from agents.layers import orthogonal
-from agents.memory.scan import Layout, ScanMemory, complex_dtype, widen
+from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
 
 
 class LRUBlock(nn.Module):
@@ -57,19 +57,24 @@ class LRUBlock(nn.Module):
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     def decay(self) -> Tensor:
-        """lambda (states,), complex, |lambda| < 1."""
-        return torch.exp(torch.complex(-torch.exp(self.nu_log), torch.exp(self.theta_log)))
+        """lambda (states,), complex, |lambda| < 1; complex64 also from the bfloat16 weights of a bf16 acting copy
+        (torch has no complex bfloat16)."""
+        return torch.exp(torch.complex(-torch.exp(widen(self.nu_log)), torch.exp(widen(self.theta_log))))
 
     def forward(self, x: Tensor, state: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
         u = widen(self.norm(x))  # (N, dim)
-        decay = self.decay().to(complex_dtype(u.dtype))
-        gamma = torch.sqrt(1 - decay.abs() ** 2)
-        # gamma scales B's rows (re and im of a state alike), not the (N, 2 states) product: a pass over the weights
-        # instead of two over the steps (forward and backward)
-        scaled_input = self.input_weight * gamma.repeat_interleave(2).unsqueeze(1)
-        inputs = torch.view_as_complex((u @ scaled_input.T.to(u.dtype)).unflatten(-1, (self.states, 2)))  # gamma B u
-        start = torch.view_as_complex(widen(state).reshape(-1, self.states, 2).contiguous())
-        h = torch.view_as_real(layout.scan(decay, inputs, start)).flatten(1)  # (N, 2 states)
+        with full_precision(u.device):  # lambda, gamma and the recurrence in fp32 (complex64) under bf16 too
+            decay = self.decay().to(complex_dtype(u.dtype))
+            gamma = torch.sqrt(1 - decay.abs() ** 2)
+            # gamma scales B's rows (re and im of a state alike), not the (N, 2 states) product: a pass over the
+            # weights instead of two over the steps (forward and backward)
+            scaled_input = self.input_weight * gamma.repeat_interleave(2).unsqueeze(1)
+        # B u is a projection as any other: bfloat16 under autocast, widened before it enters the recurrence
+        projected = widen(u @ scaled_input.T.to(u.dtype))
+        with full_precision(u.device):
+            inputs = torch.view_as_complex(projected.unflatten(-1, (self.states, 2)))  # gamma B u
+            start = torch.view_as_complex(widen(state).reshape(-1, self.states, 2).contiguous())
+            h = torch.view_as_real(layout.scan(decay, inputs, start)).flatten(1)  # (N, 2 states)
         y = h @ self.output_weight.T.to(u.dtype) + self.skip * u  # Re(C h) + D u
         y = self.out(F.gelu(y).to(x.dtype))
         return x + y, layout.last(h)

@@ -25,7 +25,7 @@ from torch.nn import functional as F
 
 from agents.config import MambaConfig
 from agents.layers import orthogonal
-from agents.memory.scan import Layout, ScanMemory, widen
+from agents.memory.scan import Layout, ScanMemory, full_precision, widen
 
 
 def causal_conv(conv: nn.Conv1d, inputs: Tensor, past: Tensor) -> tuple[Tensor, Tensor]:
@@ -98,7 +98,7 @@ class MambaBlock(nn.Module):
         main, tail = causal_conv(self.conv, layout.pad(main), state[:, : self.conv_size])  # (S, P, E)
         main = layout.unpad(main)  # (N, E)
         delta, b, c = self.select(main).split((self.rank, self.states, self.states), dim=-1)
-        step = widen(F.softplus(self.step_size(delta)))  # (N, E)
+        step = F.softplus(widen(self.step_size(delta)))  # (N, E); Delta in fp32: it sets the decays exp(Delta A)
         rate = -torch.exp(self.a_log.to(step.dtype))  # A (E, N)
         wide = widen(main)
         start = widen(state[:, self.conv_size :].reshape(-1, self.inner, self.states))
@@ -111,8 +111,10 @@ class MambaBlock(nn.Module):
             # C h: (n, E); a product and a sum, 1.7x faster forward + backward than a batched (E, N) @ (N, 1)
             return (h * c.unsqueeze(1)).sum(-1)
 
-        # the (N, E, N) decays, inputs and states never exist whole: the scan runs in blocks (Layout.scan_readout)
-        read, last = layout.scan_readout(build, readout, (step, wide, widen(b), widen(c)), start)
+        # the (N, E, N) decays, inputs and states never exist whole: the scan runs in blocks (Layout.scan_readout),
+        # in fp32 under bf16 too
+        with full_precision(x.device):
+            read, last = layout.scan_readout(build, readout, (step, wide, widen(b), widen(c)), start)
         y = self.project_out(((read + self.skip * wide) * F.silu(widen(gate))).to(x.dtype))
         return x + y, torch.cat((tail.to(state.dtype), last.flatten(1).to(state.dtype)), dim=1)
 

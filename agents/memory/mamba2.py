@@ -31,7 +31,7 @@ from torch.nn import functional as F
 from agents.config import Mamba2Config
 from agents.layers import orthogonal
 from agents.memory.mamba import causal_conv
-from agents.memory.scan import Layout, ScanMemory, linear_scan, widen
+from agents.memory.scan import Layout, ScanMemory, full_precision, linear_scan, widen
 
 
 def state_space_dual(
@@ -106,7 +106,8 @@ class Mamba2Block(nn.Module):
         s, t = step.shape[:2]
         heads = main.reshape(s, t, self.heads, self.head_dim)
         h = widen(state[:, self.conv_size :]).reshape(s, self.heads, self.head_dim, self.states)
-        y, h = state_space_dual(heads, step, rate, b, c, h, self.chunk)
+        with full_precision(x.device):  # the chunks' products and the chain of their states in fp32 under bf16 too
+            y, h = state_space_dual(heads, step, rate, b, c, h, self.chunk)
         y = layout.unpad(y + self.skip[:, None] * heads).flatten(1)  # (N, E)
         norm = self.out_norm  # in the scan's precision, with the weight of a bf16 model widened to it
         y = F.rms_norm(y * F.silu(widen(gate)), norm.normalized_shape, norm.weight.to(y.dtype), norm.eps)

@@ -25,6 +25,7 @@ the backward pass is the same chunked scan run backwards and keeps only a, the s
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 from collections.abc import Callable
@@ -39,8 +40,22 @@ from agents.memory.base import Memory
 
 def widen(x: Tensor) -> Tensor:
     """``x`` in at least single precision: the scan runs in fp32 (or fp64) even under bf16 autocast, where a long
-    product of decays would lose its precision."""
+    product of decays would lose its precision. An fp32 or fp64 ``x`` is returned as it is."""
     return x.float() if x.dtype in (torch.float16, torch.bfloat16) else x
+
+
+def scan_dtype(dtype: torch.dtype) -> torch.dtype:
+    """The dtype a recurrence computes in for inputs of ``dtype``: at least float32 (``dtype`` itself when wider)."""
+    return torch.promote_types(dtype, torch.float32)
+
+
+def full_precision(device: torch.device) -> contextlib.AbstractContextManager:
+    """Autocast off on ``device``: inside, every operation computes in its inputs' own dtype. A recurrence runs in
+    it, on inputs widened by :func:`widen`, so that a bfloat16 autocast (``run.precision: bf16``) never casts its
+    products to bfloat16 (Mamba-2's chunk products, whose states chain over the chunks), and torch's complex types,
+    which have no bfloat16, are only ever made from fp32 parts. Where autocast is off already (fp32) it changes
+    nothing."""
+    return torch.autocast(device.type, enabled=False)
 
 
 def complex_dtype(real: torch.dtype) -> torch.dtype:
@@ -347,10 +362,15 @@ class ScanMemory(Memory):
         output, final = self.forward_steps(features.reshape(s * t, -1), state, Layout(s, t))
         return output.reshape(s, t, -1), final
 
+    # The states reach the blocks in at least fp32, not in the features' dtype: under bf16 the features are bfloat16
+    # (a bf16 acting copy's, or autocast's in training), and a state rounded to bfloat16 at every decision would
+    # lose what the fp32 recurrence keeps (a block widens what it reads, but cannot restore lost digits)
     def step(self, features: Tensor, state: Tensor, episode_step: Tensor | None = None) -> tuple[Tensor, Tensor]:
-        output, final = self.forward_steps(features, state.to(features.dtype), Layout(features.shape[0], 1))
+        start = state.to(scan_dtype(features.dtype))
+        output, final = self.forward_steps(features, start, Layout(features.shape[0], 1))
         return output, final.to(state.dtype)
 
     def sequences(self, features: Tensor, records: Tensor, mask: Tensor, episode_step: Tensor | None = None) -> Tensor:
-        output, _ = self.forward_steps(features, records.to(features.dtype), Layout(*mask.shape, mask))
+        starts = records.to(scan_dtype(features.dtype))
+        output, _ = self.forward_steps(features, starts, Layout(*mask.shape, mask))
         return output
