@@ -338,12 +338,17 @@ WANDB_MODES = ("online", "offline", "disabled")
 @dataclass
 class WandbConfig:
     """Weights & Biases logging (``pip install -e ".[wandb]"``), off while ``project`` is empty: the TensorBoard
-    scalars, the resolved config and the run's git revision, one W&B run per run directory (a resume continues it)."""
+    scalars, the resolved config and the run's git revision, one W&B run per run directory (a resume continues it).
+    A setting left unset (empty, or null for ``mode``) is W&B's own: its environment variable (``WANDB_ENTITY``,
+    ``WANDB_RUN_GROUP``, ``WANDB_MODE``) or its default; ``<run>/wandb.json`` records what each start resolved."""
 
     project: str = param("", "W&B project (empty: no W&B logging)")
-    entity: str = param("", "W&B entity, a user or team (empty: the default of the logged-in account)")
-    group: str = param("", "W&B group, e.g. one per sweep panel (empty: none)")
-    mode: str = param("online", "'online', 'offline' (logs kept under <run>/wandb, synced later) or 'disabled'")
+    entity: str = param("", "W&B entity, a user or team (empty: WANDB_ENTITY, else the logged-in account's default)")
+    group: str = param("", "W&B group, e.g. one per sweep panel (empty: WANDB_RUN_GROUP, else none)")
+    mode: str | None = param(
+        None,
+        "'online', 'offline' (logs kept under <run>/wandb, synced later) or 'disabled' (null: WANDB_MODE, else online)",
+    )
 
 
 @dataclass
@@ -800,7 +805,8 @@ def _check_block(block: Any, prefix: str) -> None:
         if block.low is not None and block.high is not None and block.low > block.high:
             raise ConfigError(f"{prefix}.low={block.low} is above {prefix}.high={block.high}: expected low <= high")
     elif isinstance(block, WandbConfig):
-        _choice(f"{prefix}.mode", block.mode, WANDB_MODES)
+        if block.mode is not None:  # null: W&B's own setting (WANDB_MODE)
+            _choice(f"{prefix}.mode", block.mode, WANDB_MODES)
     elif isinstance(block, RunConfig):
         _choice(f"{prefix}.precision", block.precision, ("fp32", "bf16"))
         if not is_device_name(block.device):

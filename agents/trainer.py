@@ -75,7 +75,7 @@ from agents.ppo import explained_variance, gae_advantages, ppo_update
 from agents.preemption import Preempted, StopRequests, signal_name
 from agents.results import TRAINING_COLUMNS, config_digest
 from agents.sequences import split_sequences
-from agents.tracking import scalar_writer
+from agents.tracking import TrackingError, WandbWriter, scalar_writer, start_wandb
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
 EXTENDABLE = ("run.total_steps",)  # the only keys a resume may change: a longer run, everything else as trained
@@ -203,11 +203,17 @@ class Trainer:
         and :class:`WriteFailed` when a file cannot be written; the newest checkpoint is intact in every case."""
         if self.finished:
             return []
-        with self._writing(self.run_dir / "run_info.json"):
-            self._write_run_files()
-        with self._writing(self.run_dir / "training.csv"):
-            self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
-        writer = scalar_writer(_summary_writer(self.run_dir, self.global_step), self.config, self.run_dir)
+        wandb_writer = self._start_tracking()  # first: a W&B that cannot start stops the run before any file
+        try:
+            with self._writing(self.run_dir / "run_info.json"):
+                self._write_run_files()
+            with self._writing(self.run_dir / "training.csv"):
+                self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
+            writer = scalar_writer(_summary_writer(self.run_dir, self.global_step), wandb_writer)
+        except BaseException:
+            if wandb_writer is not None:
+                wandb_writer.close()
+            raise
         progress = _progress_bar(self.config, self.global_step)
         try:
             with StopRequests() as stops:
@@ -245,6 +251,20 @@ class Trainer:
             with self._writing(self.run_dir / "run_info.json"):
                 self._mark_finished()
         return self.history
+
+    def _start_tracking(self) -> WandbWriter | None:
+        """The W&B run (``run.wandb``), started before the run writes anything: :class:`TrackingError` saying that
+        the run directory was left as it was when W&B cannot start."""
+        new_run = self.update == 0
+        try:
+            return start_wandb(self.config, self.run_dir)
+        except TrackingError as err:
+            left = (
+                f"nothing was written to {self.run_dir}"
+                if new_run
+                else f"the run is unchanged: resume it with scripts/train.py --resume {self.run_dir}"
+            )
+            raise type(err)(f"{err}; {left}") from err
 
     def _checkpoint(self) -> Path:
         with self._writing(checkpoint_path(self.run_dir, self.update)):

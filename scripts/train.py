@@ -7,7 +7,8 @@ values at the new end.
 
 Exit status: 0 done (or finished already), 1 the run stopped on a non-finite loss or parameter or a failed write (the
 message names the update or file; the newest checkpoint is intact), 2 bad arguments, config or run directory (a
-damaged checkpoint with no intact one to fall back to is named), 76 pre-empted: SIGTERM or SLURM's warning signal
+damaged checkpoint with no intact one to fall back to is named), or a W&B run (run.wandb) that could not start (before
+anything of the run was written: the same command works once it can), 76 pre-empted: SIGTERM or SLURM's warning signal
 (SIGUSR2) stopped the run after its current update, which was checkpointed (resume it). Faults can be injected for
 tests through the MEMGYM_FAULT environment variable (agents/faults.py).
 
@@ -27,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 from agents.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
 from agents.config import ConfigError, load_config, rounding_notice  # noqa: E402
 from agents.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
+from agents.tracking import TrackingError  # noqa: E402
 from agents.trainer import Trainer, TrainingDiverged, WriteFailed, default_run_dir  # noqa: E402
 
 
@@ -72,6 +74,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"run directory: {trainer.run_dir}", flush=True)
     try:
         history = trainer.train()
+    except TrackingError as err:  # W&B could not start: nothing was written (a resumed run is as it was)
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     except (TrainingDiverged, WriteFailed) as err:
         print(f"error: {err}", file=sys.stderr)
         return 1

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from agents.checkpoint import check_checkpoint_config
@@ -144,3 +145,112 @@ def test_checkpoints_written_before_a_config_field_existed_still_load() -> None:
     saved["run"]["seed"] = 99  # a real difference is still one
     with pytest.raises(ValueError, match=r"different config than the run's config.yaml \(differing: run.seed\)"):
         check_checkpoint_config({"config": saved}, config, "update_0000001.pt")
+
+
+class FailingWandb(FakeWandb):
+    """wandb whose start fails as it does online without an API key."""
+
+    def init(self, **kwargs: Any) -> Any:
+        self.inits.append(kwargs)
+        raise RuntimeError("No API key configured. Use `wandb login` to log in.\n(a second line of detail)")
+
+
+def test_wandb_environment_variables_apply_where_the_config_leaves_a_setting_unset(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    fake = FakeWandb()
+    monkeypatch.setitem(sys.modules, "wandb", fake)
+    for name, value in {"WANDB_MODE": "offline", "WANDB_ENTITY": "team", "WANDB_RUN_GROUP": "g"}.items():
+        monkeypatch.setenv(name, value)
+    monkeypatch.setenv("WANDB_DIR", str(tmp_path / "wandb-files"))
+    Trainer(config_from_dict(TINY, ["run.total_steps=32", "run.wandb.project=p"]), tmp_path / "run").train()
+    (unset,) = fake.inits
+    # None: W&B reads its own variables (WANDB_MODE, WANDB_ENTITY, WANDB_RUN_GROUP, WANDB_DIR)
+    assert (unset["mode"], unset["entity"], unset["group"], unset["dir"]) == (None, None, None, None)
+    (start,) = json.loads((tmp_path / "run" / "wandb.json").read_text())["starts"]
+    assert {key: start[key] for key in ("mode", "entity", "group", "dir")} == {
+        "mode": "offline",
+        "entity": "team",
+        "group": "g",
+        "dir": str(tmp_path / "wandb-files"),
+    }
+    assert start["from"] == {
+        "mode": "WANDB_MODE",
+        "entity": "WANDB_ENTITY",
+        "group": "WANDB_RUN_GROUP",
+        "dir": "WANDB_DIR",
+    }
+
+    explicit = ["run.total_steps=32", "run.wandb.project=p", "run.wandb.mode=disabled", "run.wandb.group=mine"]
+    Trainer(config_from_dict(TINY, explicit), tmp_path / "other").train()
+    assert (fake.inits[1]["mode"], fake.inits[1]["group"]) == ("disabled", "mine")  # the config's own values win
+    (start,) = json.loads((tmp_path / "other" / "wandb.json").read_text())["starts"]
+    assert (start["mode"], start["from"]["mode"], start["from"]["group"]) == ("disabled", "config", "config")
+    monkeypatch.delenv("WANDB_MODE")
+    Trainer(config_from_dict(TINY, ["run.total_steps=32", "run.wandb.project=p"]), tmp_path / "third").train()
+    (start,) = json.loads((tmp_path / "third" / "wandb.json").read_text())["starts"]
+    assert (start["mode"], start["from"]["mode"]) == ("online", "W&B's default")
+
+
+def test_wandb_mode_from_the_environment_runs_offline_for_real(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The config sets no mode: WANDB_MODE=offline applies (it used to be overridden by the config's 'online', which
+    without an API key stopped the run with UsageError)."""
+    wandb = pytest.importorskip("wandb", reason="wandb is an optional extra: pip install -e '.[wandb]'")
+    wandb.teardown()  # W&B reads its variables once per process, at its first start: here, this test's
+    for name, value in {"WANDB_MODE": "offline", "WANDB_SILENT": "true", "WANDB_CONSOLE": "off"}.items():
+        monkeypatch.setenv(name, value)
+    monkeypatch.delenv("WANDB_API_KEY", raising=False)
+    monkeypatch.delenv("WANDB_DIR", raising=False)
+    run_dir = tmp_path / "run"
+    try:
+        config = config_from_dict(TINY, ["run.total_steps=32", "run.wandb.project=x", "eval.interval=0"])
+        Trainer(config, run_dir).train()
+    finally:
+        wandb.teardown()
+    run_id = json.loads((run_dir / "wandb.json").read_text())["id"]
+    assert [path.name.endswith(run_id) for path in (run_dir / "wandb").glob("offline-run-*")] == [True]
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["run"]["wandb"]["mode"] is None  # unset, as given
+
+
+def test_a_wandb_start_up_failure_exits_2_in_one_line_before_the_run_directory_exists(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    from scripts import train as train_script
+
+    monkeypatch.setitem(sys.modules, "wandb", FailingWandb())
+    config_file = tmp_path / "tiny.yaml"
+    config_file.write_text(yaml.safe_dump(TINY))
+    run_dir = tmp_path / "runs" / "tiny" / "run"
+    args = ["--config", str(config_file), "--run-dir", str(run_dir), "--set", "run.wandb.project=x"]
+    assert train_script.main(args) == 2
+    err = capsys.readouterr().err
+    (line,) = err.splitlines()
+    assert line.startswith("error: W&B could not start (RuntimeError: No API key configured. Use `wandb login`")
+    assert "mode online (W&B's default)" in line and "WANDB_MODE=offline" in line
+    assert f"nothing was written to {run_dir}" in line
+    assert not (tmp_path / "runs").exists()  # no run directory, so the same command works once W&B can start
+    monkeypatch.setitem(sys.modules, "wandb", FakeWandb())
+    assert train_script.main(args) == 0
+
+
+def test_a_wandb_start_up_failure_on_resume_leaves_the_run_resumable(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from agents.tracking import TrackingError
+
+    monkeypatch.setitem(sys.modules, "wandb", FakeWandb())
+    run_dir = tmp_path / "run"
+    killed = Trainer(config_from_dict(TINY, list(WANDB)), run_dir)
+    kill_after(killed, 2)
+    with pytest.raises(KeyboardInterrupt):
+        killed.train()
+    files = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
+    monkeypatch.setitem(sys.modules, "wandb", FailingWandb())
+    with pytest.raises(
+        TrackingError, match=f"the run is unchanged: resume it with scripts/train.py --resume {run_dir}"
+    ):
+        Trainer.resume(run_dir).train()
+    assert {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()} == files
+    fake = FakeWandb()
+    monkeypatch.setitem(sys.modules, "wandb", fake)
+    assert Trainer.resume(run_dir).train() and len(fake.inits) == 1
