@@ -7,7 +7,9 @@ each slot owns a ``numpy.random.Generator(PCG64(SeedSequence(seed)))``, so slot 
 same level as a single environment reset with seed s.
 
 Two faces wrap one core: :class:`MemoryGymEnv` (``gymnasium.make``, one slot) and :class:`MemoryGymVectorEnv`
-(``gymnasium.make_vec``, N slots, explicit autoreset mode). The trainer drives a core directly.
+(``gymnasium.make_vec``, N slots, explicit autoreset mode). The trainer drives a core directly. Cores draw
+(row, column, channel) images; a face made with ``layout="memory-gym"`` returns them transposed, as memory-gym's
+(x, y, channel) arrays (:data:`OBSERVATION_LAYOUTS`).
 
 What a family implements (``idx`` is ``slice(None)`` for all slots or an int array of slot indices):
 
@@ -51,13 +53,25 @@ from gymnasium.vector.utils import batch_space
 from envs.options import Option, check_mapping, resolve_options
 from envs.rng import seeded_generator, seeded_generators
 
-__all__ = ["BatchedCore", "Index", "MemoryGymEnv", "MemoryGymVectorEnv", "load_core", "seeded_generator"]
+__all__ = [
+    "BatchedCore",
+    "Index",
+    "MemoryGymEnv",
+    "MemoryGymVectorEnv",
+    "OBSERVATION_LAYOUTS",
+    "layout_observation_space",
+    "load_core",
+    "seeded_generator",
+]
 
 Index = slice | np.ndarray
 _SEED_TYPES = (int, np.integer)
 _UNSIGNED = {1: np.uint8, 2: np.uint16, 4: np.uint32, 8: np.uint64}  # integer itemsize -> unsigned of that size
 _FEW_ACTIONS = 8  # up to this many entries, actions are checked as Python ints (cheaper than numpy calls)
 RENDER_MODES = ["rgb_array", "debug_rgb_array", "human"]
+# The faces' observation layouts: "rows" (the default), (row, column, channel) images as render() shows them; or
+# "memory-gym", their transpose, the (x, y, channel) arrays memory-gym returns (what a policy trained on it expects).
+OBSERVATION_LAYOUTS = ("rows", "memory-gym")
 DEBUG_SCALE = 4  # the debug picture is the 84x84 ground truth drawing upscaled 4x (336x336)
 
 
@@ -311,6 +325,37 @@ def _action_bounds(space: gym.Space, num_envs: int) -> tuple[tuple[int, ...], tu
     raise NotImplementedError(f"action checks cover Discrete and MultiDiscrete spaces starting at 0, not {space}")
 
 
+def _transposes(layout: str) -> bool:
+    """Whether ``layout`` transposes the images; ``ValueError`` naming the valid layouts for anything else."""
+    if not isinstance(layout, str) or layout not in OBSERVATION_LAYOUTS:
+        raise ValueError(f"layout={layout!r} is invalid; valid layouts: {', '.join(OBSERVATION_LAYOUTS)}")
+    return layout == "memory-gym"
+
+
+def layout_observation_space(space: gym.Space, layout: str) -> gym.Space:
+    """``space``, a core's observation space (row, column, channel images), as the observations of ``layout`` fill
+    it: in memory-gym's layout every image (a ``Box`` of rank 3, also inside a ``Dict``) has its first two axes
+    swapped; other parts (the vector observations) stay as they are."""
+    if not _transposes(layout):
+        return space
+    if isinstance(space, gym.spaces.Dict):
+        return gym.spaces.Dict({key: layout_observation_space(part, layout) for key, part in space.spaces.items()})
+    if isinstance(space, gym.spaces.Box) and len(space.shape) == 3:
+        return gym.spaces.Box(space.low.swapaxes(0, 1), space.high.swapaxes(0, 1), dtype=space.dtype)
+    return space
+
+
+def _in_layout(obs: np.ndarray | dict[str, np.ndarray], transposed: bool) -> np.ndarray | dict[str, np.ndarray]:
+    """Batched observations, fresh copies from :meth:`BatchedCore.observations`, in memory-gym's layout when
+    ``transposed``: each image batch (rank 4) as a view with its axes 1 and 2 swapped. A view, not a copy: a
+    contiguous transposed copy of 3-byte pixels costs about 20 times the plain copy they already are."""
+    if not transposed:
+        return obs
+    if isinstance(obs, dict):
+        return {key: values.swapaxes(1, 2) if values.ndim == 4 else values for key, values in obs.items()}
+    return obs.swapaxes(1, 2)
+
+
 def _no_limit_before_reset(env_name: str) -> AttributeError:
     return AttributeError(
         f"{env_name} has no max_episode_steps before its first reset (the reset's options set it, as in memory-gym): "
@@ -416,7 +461,11 @@ def _check_render_mode(render_mode: str | None) -> None:
 
 
 class MemoryGymEnv(gym.Env):
-    """The single-environment face: one slot of a batched core behind the ``gymnasium.Env`` API."""
+    """The single-environment face: one slot of a batched core behind the ``gymnasium.Env`` API.
+
+    ``layout="memory-gym"`` returns memory-gym's (x, y, channel) images (transposed views of fresh arrays); the
+    default ``"rows"`` returns (row, column, channel) images. ``render()`` shows (row, column) pictures either way.
+    """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 25}
 
@@ -425,11 +474,14 @@ class MemoryGymEnv(gym.Env):
         core: str | type[BatchedCore],
         render_mode: str | None = None,
         options: Mapping[str, Any] | None = None,
+        layout: str = "rows",
         **variant: Any,
     ) -> None:
         _check_render_mode(render_mode)
+        self._transposed = _transposes(layout)
+        self.layout = layout
         self.core = load_core(core)(num_envs=1, options=options, **variant)
-        self.observation_space = self.core.single_observation_space
+        self.observation_space = layout_observation_space(self.core.single_observation_space, layout)
         self.action_space = self.core.single_action_space
         self.render_mode = render_mode
         self.metadata = {"render_modes": RENDER_MODES, "render_fps": self.core.base_render_fps}
@@ -469,7 +521,8 @@ class MemoryGymEnv(gym.Env):
         return self._obs(), float(rewards[0]), bool(terminated[0]), False, info
 
     def _obs(self) -> Any:
-        obs = self.core.observations()  # the only slot; a view, copied once (not gathered, then copied)
+        # the only slot; a view, copied once (not gathered, then copied)
+        obs = _in_layout(self.core.observations(), self._transposed)
         if isinstance(obs, dict):
             return {key: v[0] for key, v in obs.items()}
         return obs[0]
@@ -504,6 +557,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
     reset call; a reset without options goes back to the options given to ``make_vec`` (the defaults). (The single
     face applies reset options to one episode, as memory-gym does: its autoresets are the client's resets.)
     ``max_episode_steps`` is memory-gym's per-episode bound of every slot (an array, updated at each slot's reset).
+    ``layout="memory-gym"`` returns memory-gym's (x, y, channel) images (transposed views of fresh arrays).
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 25, "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -515,9 +569,12 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         render_mode: str | None = None,
         options: Mapping[str, Any] | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        layout: str = "rows",
         **variant: Any,
     ) -> None:
         _check_render_mode(render_mode)
+        self._transposed = _transposes(layout)
+        self.layout = layout
         self.core = load_core(core)(num_envs=num_envs, options=options, **variant)
         self.num_envs = self.core.num_envs
         try:
@@ -525,7 +582,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         except ValueError as err:
             valid = ", ".join(m.value for m in AutoresetMode)
             raise ValueError(f"autoreset_mode={autoreset_mode!r} is invalid; valid modes: {valid}") from err
-        self.single_observation_space = self.core.single_observation_space
+        self.single_observation_space = layout_observation_space(self.core.single_observation_space, layout)
         self.single_action_space = self.core.single_action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -588,7 +645,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         infos: dict[str, Any] = {}
         if slots.size:
             self._add_step_infos(infos, mask)
-        return self.core.observations(), infos
+        return self._observations(), infos
 
     def _slot_seeds(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
         if seed is None:
@@ -626,7 +683,11 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
             self._add_final_infos(infos, finals)
         self._needs_reset = terminated.copy() if self.autoreset_mode == AutoresetMode.NEXT_STEP else np.zeros(n, bool)
         truncated = np.zeros(n, dtype=bool)
-        return self.core.observations(), rewards, terminated, truncated, infos
+        return self._observations(), rewards, terminated, truncated, infos
+
+    def _observations(self, idx: np.ndarray | None = None) -> np.ndarray | dict[str, np.ndarray]:
+        """Fresh observations of the slots ``idx`` (all when None) in this face's layout."""
+        return _in_layout(self.core.observations(idx), self._transposed)
 
     # Infos are assembled with arrays: gymnasium's format (``info[key]`` batched over the slots, ``info["_key"]`` the
     # mask of the slots that have the key), the values and key order of ``_add_info`` applied slot by slot to each
@@ -668,7 +729,7 @@ class MemoryGymVectorEnv(gym.vector.VectorEnv):
         entries = {}
         if done:
             before = self.core.step_infos()
-            obs = self.core.observations(np.array(done))
+            obs = self._observations(np.array(done))
             for i, k in enumerate(done):
                 final_obs = {key: v[i] for key, v in obs.items()} if isinstance(obs, dict) else obs[i]
                 final_info = {key: values[k] for key, values in before.items()}
