@@ -5,6 +5,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -65,3 +67,61 @@ def test_the_headless_notebook_command_writes_the_page(tmp_path: Path) -> None:
     subprocess.run([str(jupyter), *command[1:]], cwd=ROOT, env=env, check=True, capture_output=True, timeout=300)
     page = (tmp_path / "plots.html").read_text()
     assert "<img" in page and "Traceback" not in page
+
+
+def first_hour_commands() -> list[str]:
+    """The command lines of the README's first hour (its ``sh`` block), comments left out."""
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("## The first hour") :]
+    block = re.search(r"```sh\n(.+?)\n```", section, re.S).group(1)
+    return [line for line in block.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+
+
+def fresh_checkout(target: Path) -> Path:
+    """The files a fresh clone of this working tree holds (tracked and new, not ignored), copied to ``target``."""
+    import shutil
+    import subprocess
+
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+    ).stdout.decode()
+    for name in filter(None, listed.split("\0")):
+        source = ROOT / name
+        if source.is_file():
+            (target / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(source, target / name)
+    return target
+
+
+@pytest.mark.slow
+def test_the_first_hour_runs_as_written_after_the_setup_command(tmp_path: Path) -> None:
+    """In a fresh checkout, the set-up command's job, then every line of the first hour in order, each as written
+    (in this environment's Python, which the set-up command's install gave): two runs, not one counted twice, every
+    checkpoint evaluated, figures, the notebook's page and the GIFs."""
+    import csv
+    import os
+    import subprocess
+    import sys
+
+    checkout = fresh_checkout(tmp_path / "checkout")
+    main_job = readme_commands()[0].split(" && ")[-1]
+    assert main_job == "python scripts/train.py --config configs/quickstart.yaml", main_job
+    bin_dir = str(Path(sys.executable).parent)
+    env = {**os.environ, "PATH": bin_dir + os.pathsep + os.environ.get("PATH", ""), "MPLBACKEND": "Agg"}
+    for command in [main_job, *first_hour_commands()]:
+        done = subprocess.run(
+            ["bash", "-c", command], cwd=checkout, env=env, capture_output=True, text=True, timeout=900
+        )
+        assert done.returncode == 0, f"{command}\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
+    with open(checkout / "runs" / "mine" / "episodes.csv") as handle:
+        rows = list(csv.DictReader(handle))
+    runs = {(row["method"], row["run"]) for row in rows}
+    steps = {row["step"] for row in rows}
+    assert {method for method, _ in runs} == {"gru", "ppo"} and len(runs) == 2, runs
+    assert len(steps) == 8 and len(rows) == 2 * 8 * 30 * 5
+    for path in ("runs/mine/figures/curves.png", "runs/mine/figures/final.png", "runs/mine/plots.html"):
+        assert (checkout / path).is_file(), path
+    assert len(list((checkout / "runs" / "videos" / "gifs").glob("*.gif"))) >= 2
