@@ -27,6 +27,9 @@
 * SB3: stable-baselines3-contrib RecurrentPPO at the same workers x steps, epochs and minibatch size, when
   ``sb3_contrib`` is importable (its own default network: CNN features 256, separate actor/critic LSTMs of 256).
 
+``--precision`` is the runs' ``run.precision``: bf16 (the default; bfloat16 autocast in the training passes, a
+bfloat16 copy of the weights acting, the linear recurrences in fp32) or fp32; every method runs at either.
+
 Methods are measured in turns (``--repeats`` rounds) and reported as medians and as the best round of each (the
 least disturbed one), because the machine may be shared; every round records the load average.
 Prints a table and writes the record atomically (with versions, git revision, machine) to

@@ -4,6 +4,7 @@ a bfloat16 copy of the weights acting), and the linear recurrences carry their s
 from __future__ import annotations
 
 import copy
+import json
 import math
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from agents.evaluation import evaluate
 from agents.memory import MEMORY_MODULES, build_memory
 from agents.memory.scan import ScanMemory
 from agents.trainer import Trainer
+from scripts import benchmark_training
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},
@@ -176,3 +178,16 @@ def test_the_blocks_get_the_state_in_fp32_under_bf16(name: str) -> None:
         with torch.autocast("cpu", dtype=torch.bfloat16):
             memory.sequences(torch.randn(6, 6).bfloat16(), state, mask)
     assert seen == [torch.float32, torch.float32]
+
+
+def test_the_training_benchmark_measures_lru_at_its_default_precision(tmp_path: Path) -> None:
+    """scripts/benchmark_training.py's default precision is bf16: the LRU (a complex recurrence) is measured at it,
+    in a process of its own (configs/mortar_mayhem_b_grid/lru.yaml at a tiny batch)."""
+    out = tmp_path / "training.json"
+    args = ["--env", "ProofOfMemory-v0", "--workers", "2", "--worker-steps", "8", "--epochs", "1", "--minibatches", "1"]
+    args += ["--updates", "1", "--repeats", "1", "--threads", "1", "--methods", "lru", "--sb3", "no"]
+    assert benchmark_training.main([*args, "--out", str(out)]) == 0
+    record = json.loads(out.read_text())
+    assert record["setting"]["precision"] == "bf16"
+    for row in record["summary"]["median"]["methods"].values():
+        assert row["end_to_end"] > 0 and row["bound"] > 0
