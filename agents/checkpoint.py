@@ -21,7 +21,7 @@ import torch
 import yaml
 
 from agents.actor import rollout_copy
-from agents.config import Config, config_from_dict, config_to_dict
+from agents.config import LENGTH_KEY, Config, config_from_dict, config_to_dict, differing_keys, resume_may_change
 from agents.io import atomic_write_bytes, content_record
 from agents.models import ActorCritic, observation_fields
 
@@ -207,17 +207,19 @@ def intact_checkpoint(run_dir: str | Path, usable: Any = None) -> tuple[Path, di
 
 
 def check_checkpoint_config(state: dict[str, Any], config: Config, path: str | Path) -> int | None:
-    """That the checkpoint at ``path`` was written by ``config`` (the run's ``config.yaml``). One difference is
-    allowed: ``run.total_steps`` raised since, i.e. the run was extended after this checkpoint (``train.py --resume
-    DIR --set run.total_steps=N``). Returns the checkpoint's number of updates in that case, else None."""
+    """That the checkpoint at ``path`` was written by ``config`` (the run's ``config.yaml``), but for what a resume
+    may change (:func:`agents.config.resume_may_change`): the settings no record depends on, and ``run.total_steps``
+    raised since, i.e. the run was extended after this checkpoint (``train.py --resume DIR --set
+    run.total_steps=N``). Returns the checkpoint's number of updates in that case, else None."""
     saved, current = _with_new_defaults(state["config"]), config_to_dict(config)
-    if saved == current:
-        return None
-    saved_steps = saved.get("run", {}).get("total_steps")
-    same_but_length = {**saved, "run": {**saved["run"], "total_steps": current["run"]["total_steps"]}} == current
-    if not same_but_length:
-        keys = ", ".join(_differing_keys(saved, current)) or "?"
+    changed = differing_keys(saved, current)
+    refused = [key for key in changed if not resume_may_change(key)]
+    if refused:
+        keys = ", ".join(refused)
         raise ValueError(f"{path} was written by a different config than the run's config.yaml (differing: {keys})")
+    if LENGTH_KEY not in changed:
+        return None
+    saved_steps = saved["run"]["total_steps"]
     saved_updates = saved_steps // config.batch_size
     if saved_updates > config.num_updates:
         raise ValueError(
@@ -235,14 +237,6 @@ def _with_new_defaults(saved: dict[str, Any]) -> dict[str, Any]:
         return config_to_dict(config_from_dict(saved))
     except ValueError:
         return saved
-
-
-def _differing_keys(a: Any, b: Any, prefix: str = "") -> list[str]:
-    """The dotted keys at which two nested dicts differ."""
-    if not (isinstance(a, dict) and isinstance(b, dict)):
-        return [] if a == b else [prefix or "(config)"]
-    keys = list(a) + [key for key in b if key not in a]
-    return [k for key in keys for k in _differing_keys(a.get(key), b.get(key), f"{prefix}.{key}" if prefix else key)]
 
 
 def finished_update(run_dir: str | Path) -> int | None:

@@ -604,6 +604,100 @@ def dump_config(config: Config) -> str:
     return yaml.safe_dump(config_to_dict(config), sort_keys=False)
 
 
+# ------------------------------------------------------------------------------------- what a resume may change
+LENGTH_KEY = "run.total_steps"  # a resume may raise it: the run is lengthened (agents.trainer.extend_run)
+RESULT_NEUTRAL = {  # config keys (a block: every key in it) that no record of a run depends on, and why
+    "run.progress_bar": "display only",
+    "run.checkpoint_interval": "when checkpoints are taken: a run continues exactly from any of them",
+    "run.keep_checkpoints": "how many checkpoints stay on disk",
+    "run.wandb": "where the scalars also go; TensorBoard, training.csv and the evaluation records are the same",
+    "env.check_seeding": "whether an environment that ignores seeds is refused; a run that goes on is the same",
+}
+# keys one might take for settings that no record depends on, and the record they change (said when refused)
+CHANGE_RECORDS = {
+    "run.torch_threads": "the thread count changes the floating-point rounding of the updates (the weights differ "
+    "after one update), so the run would not go on as it was trained",
+    "run.device": "another device computes other floats",
+    "run.method": "its name is in every record",
+    "run.task": "its name is in every record",
+    "eval.interval": "it decides the steps of the evaluation records",
+    "env.metric.label": "it is in the records' metric_spec column",
+}
+
+
+def resume_may_change(key: str, lengthen: bool = True) -> bool:
+    """Whether a run that goes on (``scripts/train.py --resume``, a sweep's resume, a checkpoint under a newer
+    ``config.yaml``) may take a new value of the dotted config ``key``: the settings no record depends on
+    (:data:`RESULT_NEUTRAL`, a block's keys included) and, where the run can be lengthened (``lengthen``),
+    :data:`LENGTH_KEY`. Any other change would make the run's records those of no single config."""
+    if lengthen and key == LENGTH_KEY:
+        return True
+    return any(key == neutral or key.startswith(neutral + ".") for neutral in RESULT_NEUTRAL)
+
+
+def differing_keys(a: Any, b: Any, prefix: str = "") -> list[str]:
+    """The dotted keys at which two nested dicts differ (``a``'s order, then keys only ``b`` has)."""
+    if not (isinstance(a, dict) and isinstance(b, dict)):
+        return [] if a == b else [prefix or "(config)"]
+    keys = list(a) + [key for key in b if key not in a]
+    return [k for key in keys for k in differing_keys(a.get(key), b.get(key), f"{prefix}.{key}" if prefix else key)]
+
+
+def resume_config(saved: Config, overrides: Iterable[str], where: str | Path) -> Config:
+    """The config a run resumes with: ``saved`` (its ``config.yaml``, at ``where``) with the ``key=value``
+    ``overrides``, which may change only what :func:`resume_may_change` allows; a :class:`ConfigError` names every
+    other key they change (whether a new ``run.total_steps`` lengthens the run is checked where it is extended)."""
+    overrides = list(overrides)
+    if not overrides:
+        return saved
+    new = config_from_dict(config_to_dict(saved), overrides)
+    refused = [key for key in differing_keys(config_to_dict(saved), config_to_dict(new)) if not resume_may_change(key)]
+    if refused:
+        why = "".join(f"; {key}: {CHANGE_RECORDS[key]}" for key in refused if key in CHANGE_RECORDS)
+        neutral = ", ".join(RESULT_NEUTRAL)
+        raise ConfigError(
+            f"{', '.join(refused)} cannot be changed on resume: the run goes on with the config saved in {where}"
+            f"{why}; a resume may set {LENGTH_KEY} (to lengthen the run) and the settings no record depends on "
+            f"({neutral})"
+        )
+    return new
+
+
+def sets_length(overrides: Iterable[str]) -> bool:
+    """Whether ``key=value`` overrides set :data:`LENGTH_KEY` (to whatever value: one that does not lengthen the run
+    is an error where it is extended)."""
+    return any(parse_override(item)[0] == LENGTH_KEY for item in overrides)
+
+
+def resume_changes(saved: Config, new: Config) -> dict[str, list[Any]]:
+    """``{key: [saved value, new value]}`` of the settings no record depends on that ``new`` changes."""
+    old_tree, new_tree = config_to_dict(saved), config_to_dict(new)
+    return {
+        key: [_dotted(old_tree, key), _dotted(new_tree, key)]
+        for key in differing_keys(old_tree, new_tree)
+        if resume_may_change(key, lengthen=False)
+    }
+
+
+def with_neutral_settings(saved: Config, source: Config) -> Config:
+    """``saved`` with the settings no record depends on (:data:`RESULT_NEUTRAL`) taken from ``source``: what a
+    sweep's run that goes on takes from its grid."""
+    tree, given = config_to_dict(saved), config_to_dict(source)
+    for key in RESULT_NEUTRAL:
+        *parents, name = key.split(".")
+        into, take = tree, given
+        for part in parents:
+            into, take = into[part], take[part]
+        into[name] = take[name]
+    return saved if tree == config_to_dict(saved) else config_from_dict(tree)
+
+
+def _dotted(tree: Mapping[str, Any], key: str) -> Any:
+    for part in key.split("."):
+        tree = tree.get(part) if isinstance(tree, Mapping) else None
+    return tree
+
+
 def _deep_copy(raw: Any) -> Any:
     if isinstance(raw, Mapping):
         return {k: _deep_copy(v) for k, v in raw.items()}

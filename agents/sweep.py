@@ -20,7 +20,9 @@ the last update, or none yet), ``finished`` (the newest checkpoint is the last u
 holds the run's lock). A run directory whose saved config differs from the expanded one is an error naming the run
 and the keys (:class:`SweepError`); nothing is overwritten. ``run.torch_threads`` is the one exception: left at 0
 (automatic) by the config, the launcher fixes it when it creates the run (the cores' share of a local job, the CPUs
-of a SLURM job), it is saved in config.yaml, and the run keeps it when it resumes.
+of a SLURM job), it is saved in config.yaml, and the run keeps it when it resumes. The settings no record depends on
+(progress bar, checkpoint interval and count, W&B: :func:`agents.config.resume_may_change`, the rule of every resume)
+may differ too: a run that goes on takes the grid's (:func:`prepare_run` writes them to its config.yaml).
 
 Training a run (:func:`train_run`, the same for both launchers) holds an exclusive lock on ``<run>/.lock`` (a second
 process finds the run busy and leaves it), starts from scratch when there is no checkpoint (clearing what a killed
@@ -75,6 +77,8 @@ from agents.config import (
     grid_panel,
     grid_slurm,
     read_config_file,
+    resume_may_change,
+    with_neutral_settings,
 )
 from agents.faults import FaultSpecError, active_faults
 from agents.io import atomic_write_text, create_text_once, now, provenance, write_json_atomic
@@ -361,7 +365,8 @@ def statuses(runs: Sequence[SweepRun]) -> list[RunStatus]:
 
 
 def config_differences(saved: Config, expanded: Config) -> list[str]:
-    """``key: saved X, now Y`` for every field that differs (``run.torch_threads`` only when the grid sets it)."""
+    """``key: saved X, now Y`` for every field that differs (``run.torch_threads`` only when the grid sets it), but
+    the settings no record depends on, which a run that goes on takes from the grid (:func:`prepare_run`)."""
     old, new = _flatten(config_to_dict(saved)), _flatten(config_to_dict(expanded))
     if expanded.run.torch_threads == 0:
         old.pop("run.torch_threads", None)
@@ -371,7 +376,7 @@ def config_differences(saved: Config, expanded: Config) -> list[str]:
     return [
         f"{key}: saved {_show(old.get(key, missing))}, now {_show(new.get(key, missing))}"
         for key in keys
-        if old.get(key, missing) != new.get(key, missing)
+        if old.get(key, missing) != new.get(key, missing) and not resume_may_change(key, lengthen=False)
     ]
 
 
@@ -456,6 +461,11 @@ def prepare_run(run: SweepRun, torch_threads: int = 0) -> Path:
             config = dataclasses.replace(config, run=dataclasses.replace(config.run, torch_threads=torch_threads))
         # created once: two launchers with different thread counts must not replace the config a run trains with
         create_text_once(path, dump_config(config))
+    else:  # a run that goes on takes the grid's settings that no record depends on (W&B, progress bar, ...)
+        saved = run_config(run.run_dir)
+        updated = with_neutral_settings(saved, run.config)
+        if updated is not saved:
+            atomic_write_text(path, dump_config(updated))
     return run.run_dir
 
 

@@ -17,9 +17,11 @@ progress, with a checkpoint (:class:`Preempted`); a non-finite loss, gradient or
 Every checkpoint records what ``training.csv`` and ``eval/episodes.csv`` held at its step (:func:`run_records`), and a
 resume takes the newest checkpoint that is intact and matches them (:func:`agents.checkpoint.intact_checkpoint`).
 
-A run can be lengthened when it resumes (``Trainer.resume(run_dir, ["run.total_steps=N"])``, :data:`EXTENDABLE`):
+A run can be lengthened when it resumes (``Trainer.resume(run_dir, ["run.total_steps=N"])``):
 ``config.yaml`` then holds the new length, ``run_info.json`` records the extension, and the schedules that decay over
-the whole run go on from their current values to their final values at the new end (:meth:`Schedule.value`).
+the whole run go on from their current values to their final values at the new end (:meth:`Schedule.value`). A resume
+may also change the settings no record depends on (progress bar, checkpoint interval and count, W&B:
+:data:`agents.config.RESULT_NEUTRAL`); nothing else (:func:`agents.config.resume_may_change`, the one rule).
 """
 
 from __future__ import annotations
@@ -59,7 +61,17 @@ from agents.checkpoint import (
     run_config,
     write_checkpoint,
 )
-from agents.config import Config, ConfigError, config_from_dict, config_to_dict, dump_config, parse_override
+from agents.config import (
+    LENGTH_KEY,
+    Config,
+    ConfigError,
+    config_from_dict,
+    config_to_dict,
+    dump_config,
+    resume_changes,
+    resume_config,
+    sets_length,
+)
 from agents.evaluation import (
     check_device,
     evaluate,
@@ -78,7 +90,6 @@ from agents.sequences import split_sequences
 from agents.tracking import TrackingError, WandbWriter, scalar_writer, start_wandb
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
-EXTENDABLE = ("run.total_steps",)  # the only keys a resume may change: a longer run, everything else as trained
 
 
 class TrainingDiverged(RuntimeError):
@@ -110,6 +121,10 @@ class Trainer:
         self.extensions: list[tuple[int, int]] = []
         self.extension: dict[str, Any] | None = None  # the extension made by Trainer.resume, if any (run_info record)
         self.resume_notes: list[str] = []  # damaged checkpoints Trainer.resume passed over, for the user
+        self.resumed_from: Path | None = None  # the checkpoint Trainer.resume restored
+        self.dropped: dict[str, int] = {}  # per record file, what the run logged past that checkpoint (dropped)
+        # {key: [old, new]} of the settings no record depends on that Trainer.resume changed (run_info, config.yaml)
+        self.settings_changed: dict[str, list[Any]] = {}
 
         seed = config.run.seed
         torch.manual_seed(seed)  # the weight init; every later draw uses the generators below
@@ -156,23 +171,30 @@ class Trainer:
     # ------------------------------------------------------------------------------------------------ public
     @classmethod
     def resume(cls, run_dir: str | Path, overrides: Sequence[str] = ()) -> Trainer:
-        """The trainer of ``run_dir`` restored from its newest checkpoint. ``overrides`` (``key=value``) may only
-        raise ``run.total_steps`` (:data:`EXTENDABLE`): the run is then extended from that checkpoint on
-        (:func:`extend_run`), finished or not; any other key is a :class:`ConfigError` naming it.
+        """The trainer of ``run_dir`` restored from its newest checkpoint. ``overrides`` (``key=value``) may raise
+        ``run.total_steps``, and the run is then extended from that checkpoint on (:func:`extend_run`), finished or
+        not, and change the settings no record depends on (:func:`agents.config.resume_config`: written to
+        ``config.yaml`` and ``run_info.json`` when training goes on); any other key is a :class:`ConfigError`
+        naming it, raised before anything is touched.
 
         A damaged checkpoint (truncated or corrupted), or one whose records (``training.csv``,
         ``eval/episodes.csv``) no longer hold what it recorded of them, is passed over for the newest intact one
         and moved aside (``resume_notes`` says which and why); :class:`DamagedCheckpoint` naming the files when
-        none is intact."""
+        none is intact. ``resumed_from`` and ``dropped`` say which checkpoint was restored and how much of what the
+        run logged past it is dropped."""
         run_dir = Path(run_dir)
-        config = run_config(run_dir)
+        saved = run_config(run_dir)
+        config = resume_config(saved, overrides, run_dir / "config.yaml")
         path, state, notes = intact_checkpoint(run_dir, lambda found, saved: check_run_records(run_dir, found, saved))
         extension = None
-        if overrides:
-            config, extension = extend_run(run_dir, config, overrides, checkpoint_update(path))
+        if sets_length(overrides):
+            _, extension = extend_run(run_dir, saved, config.run.total_steps, checkpoint_update(path))
         trainer = cls(config, run_dir)
         trainer.load_checkpoint(path, state)
         trainer.extension = extension
+        trainer.settings_changed = resume_changes(saved, config)
+        trainer.resumed_from = path
+        trainer.dropped = records_past(run_dir, trainer.global_step)
         trainer.resume_notes = [*notes, f"resuming from {path.name}"] if notes else []
         return trainer
 
@@ -527,31 +549,25 @@ class Trainer:
     def _write_run_files(self) -> None:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         config_path = self.run_dir / "config.yaml"
-        if not config_path.exists():
+        if not config_path.exists() or self.settings_changed:  # a resume's new settings are the run's from now on
             atomic_write_text(config_path, dump_config(self.config))
         info_path = self.run_dir / "run_info.json"
         info = json.loads(info_path.read_text()) if info_path.exists() else run_info(self.config)
         if self.update > 0:
-            info.setdefault("resumed", []).append({"time": now(), "update": self.update, "command": sys.argv})
+            resumed = {"time": now(), "update": self.update, "command": sys.argv}
+            if self.settings_changed:
+                resumed["changed"] = self.settings_changed
+            info.setdefault("resumed", []).append(resumed)
         write_json_atomic(info_path, info, sort_keys=False)
 
 
 # ----------------------------------------------------------------------------------------------- helpers
-def extend_run(
-    run_dir: Path, config: Config, overrides: Sequence[str], update: int
-) -> tuple[Config, dict[str, Any] | None]:
-    """Lengthen the run in ``run_dir`` (saved config ``config``, newest checkpoint at ``update``) by ``overrides``,
-    which may only set :data:`EXTENDABLE` keys and must add at least one update. Writes the new ``config.yaml`` and
-    records the extension in ``run_info.json`` (``extended``: when, at which update and step, old and new length;
-    its ``finished`` entry goes, since the run is not any more). Returns the new config and that record."""
-    for item in overrides:
-        key, _ = parse_override(item)
-        if key not in EXTENDABLE:
-            raise ConfigError(
-                f"{key} cannot be changed on resume: the run goes on with the config saved in "
-                f"{run_dir / 'config.yaml'}; only {', '.join(EXTENDABLE)} can be set, to lengthen the run"
-            )
-    new = config_from_dict(config_to_dict(config), overrides)
+def extend_run(run_dir: Path, config: Config, total_steps: int, update: int) -> tuple[Config, dict[str, Any]]:
+    """Lengthen the run in ``run_dir`` (saved config ``config``, newest checkpoint at ``update``) to ``total_steps``,
+    which must add at least one update. Writes the new ``config.yaml`` and records the extension in ``run_info.json``
+    (``extended``: when, at which update and step, old and new length; its ``finished`` entry goes, since the run is
+    not any more). Returns the new config and that record."""
+    new = config_from_dict(config_to_dict(config), [f"{LENGTH_KEY}={total_steps}"])
     batch, old_updates, new_updates = config.batch_size, config.num_updates, new.num_updates
     if new_updates <= old_updates:
         raise ConfigError(
@@ -602,6 +618,18 @@ class TrainingLog:
 
     def close(self) -> None:
         self._handle.close()
+
+
+def records_past(run_dir: Path, step: int) -> dict[str, int]:
+    """How many rows of ``training.csv`` (a last line cut short by a kill counts as one) and records of
+    ``eval/episodes.csv`` the run holds past ``step``: what resuming from the checkpoint at ``step`` drops."""
+    path = run_dir / "training.csv"
+    text = path.read_text() if path.is_file() else ""
+    torn = int(bool(text) and not text.endswith("\n"))
+    rows = sum(int(row["step"]) > step for row in _complete_rows(path)) + torn
+    records = run_dir / "eval" / "episodes.csv"
+    found = read_records(records, skip_malformed=True) if records.is_file() else []
+    return {"training.csv": rows, "eval/episodes.csv": sum(record["step"] > step for record in found)}
 
 
 def training_log_text(path: Path, step: int, columns: tuple[str, ...] = TRAINING_COLUMNS) -> str:

@@ -1,9 +1,12 @@
 """Train one config: ``python scripts/train.py --config FILE [--set key=value ...] [--run-dir DIR]``.
 
-``--resume DIR`` continues a run from its newest checkpoint with the config saved in DIR; a finished run is left as
-it is (exit 0). ``--resume DIR --set run.total_steps=N`` lengthens a run, finished or not, to N steps (the only key
-a resume may change); the schedules that decay over the whole run go on from their current values to their final
-values at the new end.
+``--resume DIR`` continues a run from its newest checkpoint with the config saved in DIR (it says which checkpoint,
+and how many rows of training.csv and eval/episodes.csv logged past it are dropped); a finished run is left as it is
+(exit 0). ``--resume DIR --set run.total_steps=N`` lengthens a run, finished or not, to N steps; the schedules that
+decay over the whole run go on from their current values to their final values at the new end. Besides that, a
+resume takes only the settings no record depends on (``--set run.progress_bar=false``, run.checkpoint_interval,
+run.keep_checkpoints, run.wandb.*, env.check_seeding: agents.config.RESULT_NEUTRAL), which config.yaml keeps from
+then on; any other key is refused, by name.
 
 Exit status: 0 done (or finished already), 1 the run stopped on a non-finite loss or parameter or a failed write (the
 message names the update or file; the newest checkpoint is intact), 2 bad arguments, config or run directory (a
@@ -23,10 +26,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
-from agents.config import ConfigError, load_config, rounding_notice  # noqa: E402
+from agents.config import ConfigError, load_config, resume_config, rounding_notice, sets_length  # noqa: E402
 from agents.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
 from agents.tracking import TrackingError  # noqa: E402
 from agents.trainer import Trainer, TrainingDiverged, WriteFailed, default_run_dir  # noqa: E402
@@ -40,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override (repeatable); with --resume only run.total_steps=N, to lengthen the run",
+        help="override (repeatable); with --resume only run.total_steps=N, to lengthen the run, and the settings "
+        "no record depends on (e.g. run.progress_bar, run.wandb.*)",
     )
     parser.add_argument("--run-dir", help="run directory (default: runs/<config name>/<timestamp>-seed<seed>)")
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its newest checkpoint")
@@ -51,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("give --config FILE (or --resume DIR)")
     try:
         if args.resume:
-            if not args.set and (done := _finished(Path(args.resume))):
+            if done := _finished(Path(args.resume), args.set):
                 print(done)
                 return 0
             trainer = Trainer.resume(args.resume, args.set)
@@ -66,6 +72,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     for note in trainer.resume_notes:  # damaged checkpoints passed over
         print(f"warning: {note}", file=sys.stderr, flush=True)
+    if trainer.resumed_from is not None:
+        print(_resume_message(trainer), flush=True)
+    if trainer.settings_changed:
+        changes = ", ".join(
+            f"{key}: {_yaml(old)} -> {_yaml(new)}" for key, (old, new) in trainer.settings_changed.items()
+        )
+        print(f"settings changed on resume (no record depends on them): {changes}", flush=True)
     if trainer.extension is not None:
         print(_extension_message(trainer.extension), flush=True)
     notice = rounding_notice(trainer.config)
@@ -90,10 +103,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _finished(run_dir: Path) -> str | None:
-    """What to say when the run in ``run_dir`` has done all its updates (None when it has not): read from the
-    config and the newest checkpoint's name, before anything is built or written."""
+def _finished(run_dir: Path, overrides: list[str]) -> str | None:
+    """What to say when the run in ``run_dir`` has done all its updates and ``overrides`` do not lengthen it (None
+    otherwise): read from the config and the newest checkpoint's name, before anything is built or written. Overrides
+    a resume refuses are refused here too (ConfigError)."""
     config, latest = run_config(run_dir), latest_checkpoint(run_dir)
+    resume_config(config, overrides, run_dir / "config.yaml")  # what a resume refuses is refused for a finished run too
+    if sets_length(overrides):
+        return None  # Trainer.resume lengthens the run (or says why the value does not lengthen it)
     if latest is None or checkpoint_update(latest) < config.num_updates or checkpoint_damage(latest):
         return None  # a damaged last checkpoint: Trainer.resume falls back to an intact one (or names the damage)
     steps, total = checkpoint_update(latest) * config.batch_size, config.num_updates * config.batch_size
@@ -101,6 +118,22 @@ def _finished(run_dir: Path) -> str | None:
         f"{run_dir}: already finished ({steps} steps of {total}); nothing changed. "
         f"To train it further: --resume {run_dir} --set run.total_steps=N (N >= {total + config.batch_size})"
     )
+
+
+def _resume_message(trainer: Trainer) -> str:
+    dropped = trainer.dropped
+    rows, records = dropped.get("training.csv", 0), dropped.get("eval/episodes.csv", 0)
+    return (
+        f"resuming from {trainer.resumed_from} (update {trainer.update} of {trainer.num_updates}, step "
+        f"{trainer.global_step}); dropped what the run logged after it: {rows} row{'' if rows == 1 else 's'} of "
+        f"training.csv, {records} record{'' if records == 1 else 's'} of eval/episodes.csv (and their TensorBoard "
+        "points)"
+    )
+
+
+def _yaml(value: Any) -> str:
+    """A setting's value as YAML writes it in config.yaml (true, null, 3, offline)."""
+    return yaml.safe_dump(value, default_flow_style=True).strip().removesuffix("...").strip()
 
 
 def _extension_message(record: dict[str, Any]) -> str:

@@ -135,6 +135,11 @@ def test_extending_a_finished_run_trains_exactly_the_added_updates(
         ("run.total_steps=190", "give at least 192 to add an update"),
         ("run.total_steps=1.5e2", "run.total_steps=150 does not lengthen the run"),
         ("run.total_steps=fast", "run.total_steps='fast' is invalid: expected an int"),
+        ("run.torch_threads=2", "run.torch_threads cannot be changed on resume"),
+        ("run.torch_threads=2", "the thread count changes the floating-point rounding"),
+        ("run.method=other", "run.method cannot be changed on resume"),
+        ("eval.interval=1", "eval.interval cannot be changed on resume"),
+        ("grid.run.seed=[1, 2]", "grid.run.seed cannot be changed on resume"),
     ],
 )
 def test_a_resume_refuses_any_other_change_naming_the_key(
@@ -146,3 +151,71 @@ def test_a_resume_refuses_any_other_change_naming_the_key(
     assert train_script.main(["--resume", str(run_dir), "--set", override]) == 2
     assert message in capsys.readouterr().err
     assert _snapshot(run_dir) == before
+
+
+def test_a_resume_names_every_key_it_refuses_and_what_it_takes(
+    tmp_path: Path, config_file: Path, capsys: pytest.CaptureFixture
+) -> None:
+    run_dir = _trained(tmp_path, config_file)
+    capsys.readouterr()
+    args = ["--resume", str(run_dir), "--set", "ppo.gamma=0.9", "--set", "run.progress_bar=true", "--set", "run.seed=3"]
+    assert train_script.main(args) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("error: ppo.gamma, run.seed cannot be changed on resume")
+    assert "run.total_steps (to lengthen the run)" in line and "run.progress_bar" in line and "run.wandb" in line
+
+
+RESUMABLE = [  # 4 updates, a checkpoint every 2, an evaluation (2 records) after every update
+    "run.total_steps=256",
+    "run.checkpoint_interval=2",
+    "eval.interval=1",
+    "eval.seeds=[100000, 100001]",
+    "eval.repetitions=1",
+]
+
+
+def test_a_resume_takes_the_settings_no_record_depends_on_and_ends_as_an_uninterrupted_run(
+    tmp_path: Path, config_file: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """run.progress_bar, run.checkpoint_interval, run.keep_checkpoints and run.wandb change on resume; the records
+    come out byte for byte those of the run trained in one go with the old settings. The command says which
+    checkpoint it resumes from and what it dropped past it (one row of training.csv, one evaluation's records)."""
+    from agents.config import load_config
+    from agents.trainer import Trainer
+    from tests.support.interrupt import kill_after
+
+    whole = tmp_path / "whole" / "run"
+    sets = [item for setting in RESUMABLE for item in ("--set", setting)]
+    assert train_script.main(["--config", str(config_file), "--run-dir", str(whole), *sets]) == 0
+    run_dir = tmp_path / "killed" / "run"
+    killed = Trainer(load_config(config_file, [*RESUMABLE, "run.progress_bar=true"]), run_dir)
+    kill_after(killed, 3)  # past the checkpoint of update 2: update 3's row and evaluation are logged
+    with pytest.raises(KeyboardInterrupt):
+        killed.train()
+    capsys.readouterr()
+    changes = [
+        "run.progress_bar=false",
+        "run.checkpoint_interval=1",
+        "run.keep_checkpoints=0",
+        "run.wandb.mode=disabled",
+    ]
+    assert train_script.main(["--resume", str(run_dir), *(x for c in changes for x in ("--set", c))]) == 0
+    out = capsys.readouterr().out
+    assert f"resuming from {run_dir / 'checkpoints' / 'update_0000002.pt'} (update 2 of 4, step 128)" in out
+    assert "dropped what the run logged after it: 1 row of training.csv, 2 records of eval/episodes.csv" in out
+    assert "run.progress_bar: true -> false" in out and "run.wandb.mode: null -> disabled" in out
+    for name in ("training.csv", "eval/episodes.csv"):
+        assert (run_dir / name).read_bytes() == (whole / name).read_bytes()
+    saved = yaml.safe_load((run_dir / "config.yaml").read_text())["run"]
+    assert (saved["progress_bar"], saved["checkpoint_interval"], saved["keep_checkpoints"]) == (False, 1, 0)
+    assert saved["wandb"]["mode"] == "disabled"
+    (resumed,) = json.loads((run_dir / "run_info.json").read_text())["resumed"]
+    assert resumed["changed"] == {
+        "run.checkpoint_interval": [2, 1],
+        "run.keep_checkpoints": [2, 0],
+        "run.progress_bar": [True, False],
+        "run.wandb.mode": [None, "disabled"],
+    }
+    assert [p.name for p in sorted((run_dir / "checkpoints").iterdir())] == [f"update_{u:07d}.pt" for u in (2, 3, 4)]
+    assert train_script.main(["--resume", str(run_dir), "--set", "run.progress_bar=true"]) == 0
+    assert "already finished (256 steps of 256); nothing changed" in capsys.readouterr().out
