@@ -55,12 +55,19 @@ def build_agent(config: Config, core: Any, device: torch.device | str = "cpu") -
     """The trainable model and the frozen HELM branch (None without one) of ``config``, on ``device``, for the
     environment of ``core`` (its spaces, and its ground truth with ``ppo.ground_truth_coef``)."""
     observation_space, action_space = core.single_observation_space, core.single_action_space
+    named = f"{config.env.id}'s observation space {environment_space(core)}"
     helm = None
     if config.model.helm.enabled:
         from agents.helm import HelmBranch
 
         h = config.model.helm
-        image_shape = observation_fields(observation_space)["image"].shape
+        image = observation_fields(observation_space).get("image")
+        if image is None:
+            raise ValueError(
+                f"model.helm.lm={h.lm!r}: the HELM branch needs an image observation, but {named} has none: set "
+                "model.helm.lm: none"
+            )
+        image_shape = image.shape
         helm = HelmBranch(
             image_shape,  # type: ignore[arg-type]
             lm=h.lm,
@@ -75,8 +82,16 @@ def build_agent(config: Config, core: Any, device: torch.device | str = "cpu") -
     helm_size = 0 if helm is None else helm.output_size
     reconstruction = config.ppo.reconstruction_coef > 0
     ground_truth = ground_truth_size(config, core)
-    model = ActorCritic(observation_space, action_space, config.model, helm_size, reconstruction, ground_truth)
+    model = ActorCritic(observation_space, action_space, config.model, helm_size, reconstruction, ground_truth, named)
     return model.to(device), helm
+
+
+def environment_space(core: Any) -> str:
+    """The environment's own observation space as one line: a gymnasium environment's (``core.layout.space``), not
+    the Dict of ``visual_observation`` / ``vector_observation`` it is translated into for the model."""
+    layout = getattr(core, "layout", None)
+    space = layout.space if layout is not None else core.single_observation_space
+    return " ".join(str(space).split())  # numpy pads the bounds of a Box with runs of spaces
 
 
 def check_helm(helm: Any, state: dict[str, Any], path: str | Path) -> None:

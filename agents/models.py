@@ -223,20 +223,23 @@ class ActorCritic(nn.Module):
         helm_size: int = 0,
         reconstruction: bool = False,
         ground_truth_size: int = 0,
+        observations_named: str = "",
     ) -> None:
         """``helm_size``: width of the HELM branch's output (0: no branch); the branch itself is frozen and lives
         with the actor, which caches its outputs as the ``helm`` input. ``reconstruction``: add the observation
         decoder (``ppo.reconstruction_coef`` > 0), trained only through its loss. ``ground_truth_size``: add the
         ground-truth estimator (``ppo.ground_truth_coef`` > 0) for targets of that size, trained only through its
-        loss (0: none)."""
+        loss (0: none). ``observations_named``: how an error names the observations (the environment's own space,
+        which a gymnasium environment translates into ``observation_space``); default: ``observation_space``."""
         super().__init__()
         self.action_dims = action_branches(action_space)
         self.inputs = model_inputs(observation_space, action_space, config, helm_size)
         image = self.inputs.get("image")
+        named = observations_named or str(observation_space)
         if config.encoder == "mlp":
             if image is not None:
                 raise ValueError(
-                    f"model.encoder=mlp takes observations without an image, but {observation_space} has one: "
+                    f"model.encoder=mlp takes observations without an image, but {named} has one: "
                     f"use an image encoder ({', '.join(IMAGE_ENCODERS)})"
                 )
             self.image_encoder = None
@@ -244,13 +247,13 @@ class ActorCritic(nn.Module):
         else:
             if image is None:
                 raise ValueError(
-                    f"model.encoder={config.encoder} needs an image observation, but {observation_space} has none: "
+                    f"model.encoder={config.encoder} needs an image observation, but {named} has none: "
                     "set model.encoder: mlp (its layers: model.mlp_sizes)"
                 )
             self.image_encoder = IMAGE_ENCODERS[config.encoder](image.shape)  # type: ignore[arg-type]
             vector_sizes = [config.vector_encoder_size]
         if (helm_size or reconstruction) and image is None:
-            raise ValueError(f"the HELM branch and the reconstruction loss need an image; {observation_space} has none")
+            raise ValueError(f"the HELM branch and the reconstruction loss need an image; {named} has none")
         vector_size = self.inputs["vector"].shape[0] if "vector" in self.inputs else 0
         vector_size += sum(self.action_dims) if config.previous_action else 0
         vector_size += 1 if config.previous_reward else 0

@@ -219,3 +219,39 @@ def test_a_resume_takes_the_settings_no_record_depends_on_and_ends_as_an_uninter
     assert [p.name for p in sorted((run_dir / "checkpoints").iterdir())] == [f"update_{u:07d}.pt" for u in (2, 3, 4)]
     assert train_script.main(["--resume", str(run_dir), "--set", "run.progress_bar=true"]) == 0
     assert "already finished (256 steps of 256); nothing changed" in capsys.readouterr().out
+
+
+def test_an_encoder_that_does_not_fit_names_the_environments_own_observation_space(
+    tmp_path: Path, config_file: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """A gymnasium environment's observations reach the model translated (a Dict of vector_observation and/or
+    visual_observation): the error names the space the user's environment has, not the translation."""
+    import gymnasium as gym
+
+    from tests.support.tiny_env import ENV_ID
+
+    cartpole = " ".join(str(gym.make("CartPole-v1").observation_space).split())
+    args = ["--config", str(config_file), "--run-dir", str(tmp_path / "run"), "--set", "env.id=CartPole-v1"]
+    assert train_script.main([*args, "--set", "env.options={}", "--set", "model.encoder=nature_cnn"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line == (
+        f"error: model.encoder=nature_cnn needs an image observation, but CartPole-v1's observation space {cartpole} "
+        "has none: set model.encoder: mlp (its layers: model.mlp_sizes)"
+    )
+    assert (
+        train_script.main(
+            [*args, "--set", "env.options={}", "--set", "model.encoder=mlp", "--set", "model.helm.lm=random"]
+        )
+        == 2
+    )
+    assert capsys.readouterr().err == (
+        f"error: model.helm.lm='random': the HELM branch needs an image observation, but CartPole-v1's observation "
+        f"space {cartpole} has none: set model.helm.lm: none\n"
+    )
+    image = ["--set", f"env.id={ENV_ID}", "--set", "env.options={}", "--set", "env.image_layout=chw"]
+    image += ["--set", "env.make_kwargs={observation: image_chw}", "--set", "model.encoder=mlp"]
+    assert train_script.main([*args, *image]) == 2
+    err = capsys.readouterr().err
+    assert "Dict(" not in err and "(36, 36, 3)" not in err
+    assert f"but {ENV_ID}'s observation space Box(0, 255, (3, 36, 36), uint8) has one: use an image encoder" in err
+    assert not (tmp_path / "run").exists()
