@@ -106,7 +106,10 @@ class Trainer:
 
     def __init__(self, config: Config, run_dir: str | Path) -> None:
         if config.grid:
-            raise ValueError("this config has a grid: block; expand it with scripts/sweep.py, train.py runs one config")
+            raise ValueError(
+                "this config has a grid: block: train one of its runs with scripts/train.py --config FILE --only "
+                "KEY=VALUE[,...], or all of them with scripts/sweep.py"
+            )
         self.config = config
         self.run_dir = Path(run_dir)
         self.device = check_device(config.run.device, "run.device")
@@ -767,10 +770,12 @@ def run_info(config: Config) -> dict[str, Any]:
     return {"seed": config.run.seed, "num_updates": config.num_updates, "batch_size": config.batch_size, **provenance()}
 
 
-def default_run_dir(config_path: str | Path, seed: int, root: str | Path = "runs") -> Path:
-    """``runs/<config name>/<timestamp>-seed<seed>``; the name is the path below ``configs/`` without suffix."""
+def default_run_dir(config_path: str | Path, seed: int, root: str | Path = "runs", cell: Sequence[str] = ()) -> Path:
+    """``runs/<config name>/<timestamp>-seed<seed>``; the name is the path below ``configs/`` without suffix. One run
+    of a grid config (``train.py --only``) goes under its ``cell`` (method and task) in between:
+    ``runs/<config name>/<method>/<task>/<timestamp>-seed<seed>``."""
     path = Path(config_path).resolve()
     parts = path.with_suffix("").parts
     name = "/".join(parts[parts.index("configs") + 1 :]) if "configs" in parts[:-1] else path.stem
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return Path(root) / name / f"{stamp}-seed{seed}"
+    return Path(root).joinpath(name, *cell, f"{stamp}-seed{seed}")

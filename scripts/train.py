@@ -17,6 +17,11 @@ tests through the MEMGYM_FAULT environment variable (agents/faults.py).
 
 The run directory (default ``runs/<config name>/<timestamp>-seed<seed>``) receives the resolved config, run_info.json
 (seed, versions, git revision, resumes and extensions), training.csv, TensorBoard events and checkpoints.
+
+A grid config (a ``grid:`` block, which scripts/sweep.py expands into runs) trains one of its runs, the one that
+``--only KEY=VALUE[,KEY=VALUE...]`` selects: scripts/sweep.py's selection (keys: method, task, seed and the grid's
+axes; values: the bundles' names and the axes' values), which must select exactly one run. It goes to
+``runs/<config name>/<method>/<task>/<timestamp>-seed<seed>`` and is the run the sweep would train, names and all.
 """
 
 from __future__ import annotations
@@ -31,8 +36,9 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
-from agents.config import ConfigError, load_config, resume_config, rounding_notice, sets_length  # noqa: E402
+from agents.config import Config, ConfigError, load_config, resume_config, rounding_notice, sets_length  # noqa: E402
 from agents.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
+from agents.sweep import SweepError, SweepRun, load_panel, run_coordinates, select_runs  # noqa: E402
 from agents.tracking import TrackingError  # noqa: E402
 from agents.trainer import Trainer, TrainingDiverged, WriteFailed, default_run_dir  # noqa: E402
 
@@ -50,9 +56,17 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--run-dir", help="run directory (default: runs/<config name>/<timestamp>-seed<seed>)")
     parser.add_argument("--resume", metavar="DIR", help="continue the run in DIR from its newest checkpoint")
+    parser.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[,KEY=VALUE...]",
+        help="with a grid config: the one run to train, selected as scripts/sweep.py --only selects runs (e.g. "
+        "method=gru,seed=1); keys: method, task, seed and the grid's axes",
+    )
     args = parser.parse_args(argv)
-    if args.resume and (args.config or args.run_dir):
-        parser.error("--resume DIR takes the config saved in DIR; it cannot be combined with --config/--run-dir")
+    if args.resume and (args.config or args.run_dir or args.only):
+        parser.error("--resume DIR takes the config saved in DIR; it cannot be combined with --config/--run-dir/--only")
     if not args.resume and not args.config:
         parser.error("give --config FILE (or --resume DIR)")
     try:
@@ -63,11 +77,16 @@ def main(argv: list[str] | None = None) -> int:
             trainer = Trainer.resume(args.resume, args.set)
         else:
             config = load_config(args.config, args.set)
-            run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(args.config, config.run.seed)
+            cell: tuple[str, ...] = ()
+            if config.grid or args.only:
+                run = _grid_run(args.config, args.set, args.only, config)
+                config, cell = run.config, (run.config.method, run.config.task)
+                print(f"training one run of the grid: {run.name}", flush=True)
+            run_dir = Path(args.run_dir) if args.run_dir else default_run_dir(args.config, config.run.seed, cell=cell)
             if (run_dir / "config.yaml").exists():
                 parser.error(f"{run_dir} already holds a run; use --resume {run_dir} or another --run-dir")
             trainer = Trainer(config, run_dir)
-    except (ConfigError, FileNotFoundError, ValueError) as err:
+    except (ConfigError, SweepError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     for note in trainer.resume_notes:  # damaged checkpoints passed over
@@ -101,6 +120,57 @@ def main(argv: list[str] | None = None) -> int:
         summary = {k: v for k, v in last.items() if k.startswith(("charts/episodic", "env/"))}
         print("last update: " + ", ".join(f"{k}={v:.4g}" for k, v in summary.items()))
     return 0
+
+
+def _grid_run(config_path: str, overrides: list[str], only: list[str], config: Config) -> SweepRun:
+    """The run of the grid config at ``config_path`` (``config``: as loaded) that ``only`` selects, as
+    scripts/sweep.py expands and selects it (:func:`agents.sweep.select_runs`); a ConfigError that says what can be
+    selected when ``only`` is missing or selects several runs, a SweepError when it selects none."""
+    if not config.grid:
+        raise ConfigError(
+            f"--only selects a run of a grid config, and {config_path} has no grid: block (train it without --only)"
+        )
+    panel = load_panel(config_path, overrides)
+    if not only:
+        raise ConfigError(
+            f"{config_path} has a grid: block ({len(panel.runs)} runs): train one of them with --only "
+            f"KEY=VALUE[,KEY=VALUE...] (e.g. --only {_example(panel.runs)}; {_choices(panel.runs)}), or all of them "
+            f"with python scripts/sweep.py {config_path}"
+        )
+    runs = [run for selected in select_runs([panel], only) for run in selected.runs]
+    if len(runs) > 1:
+        raise ConfigError(
+            f"--only {' '.join(only)} selects {len(runs)} runs of {config_path}, expected one: "
+            f"{', '.join(run.name for run in runs)}; add pairs that tell them apart ({_choices(runs, varying=True)})"
+        )
+    return runs[0]
+
+
+def _values(runs: list[SweepRun]) -> dict[str, list[str]]:
+    """Per key --only takes (:func:`agents.sweep.run_coordinates`), the values ``runs`` have, in order."""
+    values: dict[str, list[str]] = {}
+    for run in runs:
+        for key, value in run_coordinates(run).items():
+            if value not in values.setdefault(key, []):
+                values[key].append(value)
+    return values
+
+
+def _choices(runs: list[SweepRun], varying: bool = False) -> str:
+    """``method: gru, ppo; task: ...; seed: 1, 2`` (``varying``: only the keys whose values differ)."""
+    found = _values(runs).items()
+    return "; ".join(f"{_key(key)}: {', '.join(values)}" for key, values in found if not varying or len(values) > 1)
+
+
+def _example(runs: list[SweepRun]) -> str:
+    """An --only value that selects the first run: its value of every key the runs differ in."""
+    first = run_coordinates(runs[0])
+    keys = [key for key, values in _values(runs).items() if len(values) > 1] or ["run.seed"]
+    return ",".join(f"{_key(key)}={first[key]}" for key in keys)
+
+
+def _key(key: str) -> str:
+    return "seed" if key == "run.seed" else key
 
 
 def _finished(run_dir: Path, overrides: list[str]) -> str | None:
