@@ -11,13 +11,18 @@ Closing the window ends the game. Controls, as in memory-gym:
 * grid movement (MM-Grid, MMB-Grid, MP-Grid): one step per key press. W/Up = forward, A/Left = turn left,
   D/Right = turn right, Space = wait (Mortar Mayhem grids only). MM-Grid plays the command icons by itself.
 * Endless Mystery Path: held keys, one step per frame. D/Right = right, W/Up = up, S/Down = down, else wait.
+
+The scripts need a display. Without ``DISPLAY`` and ``WAYLAND_DISPLAY`` (and without ``SDL_VIDEODRIVER``), or when
+the display cannot be opened, they stop with exit status 2 and one line that says so, instead of playing in a window
+nobody sees. ``SDL_VIDEODRIVER`` forces a video driver (``x11``, ``wayland``, ...; ``dummy`` plays without a window).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Callable, Iterable, Iterator
+import sys
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -88,6 +93,36 @@ SCRIPTS: dict[str, tuple[str, Controls]] = {
     "endless_searing_spotlights": ("Endless-SearingSpotlights-v0", FREE),
 }
 SEED_KEYS = {pygame.K_PAGEUP: 1, pygame.K_PAGEDOWN: -1}
+DISPLAY_VARIABLES = ("DISPLAY", "WAYLAND_DISPLAY")
+INVISIBLE_DRIVERS = ("offscreen", "dummy")  # SDL's drivers without a window (it falls back to offscreen by itself)
+FORCE_DRIVER = "to force a video driver, set SDL_VIDEODRIVER (e.g. x11 or wayland; dummy plays without a window)"
+
+
+class DisplayError(RuntimeError):
+    """No window can be shown: no display, or one that cannot be opened."""
+
+
+def missing_display(environ: Mapping[str, str]) -> str | None:
+    """Why the game cannot be shown in ``environ`` (None when a display is named or a video driver is forced)."""
+    if environ.get("SDL_VIDEODRIVER") or any(environ.get(name) for name in DISPLAY_VARIABLES):
+        return None
+    return f"needs a display, and neither DISPLAY nor WAYLAND_DISPLAY is set; {FORCE_DRIVER}"
+
+
+def open_window() -> HumanWindow:
+    """The game's window. Opened before the environment is made, which defaults SDL_VIDEODRIVER to "dummy" for its
+    own drawing; without a forced driver, SDL's fallback to an invisible one is a :class:`DisplayError`."""
+    forced = os.environ.get("SDL_VIDEODRIVER")
+    window = HumanWindow()
+    driver = pygame.display.get_driver()
+    if not forced and driver in INVISIBLE_DRIVERS:
+        window.close()
+        named = ", ".join(f"{name}={os.environ[name]!r}" for name in DISPLAY_VARIABLES if os.environ.get(name))
+        raise DisplayError(
+            f"cannot open a window on the display ({named}): SDL fell back to its invisible {driver!r} driver; "
+            f"{FORCE_DRIVER}"
+        )
+    return window
 
 
 @dataclass
@@ -114,15 +149,19 @@ def play(
     the loop holds the environment's frame rate (3 fps while Mortar Mayhem shows commands), otherwise it runs free.
     """
     next_events = _event_source(events)
-    env = gym.make(env_id, render_mode="debug_rgb_array", disable_env_checker=True)
+    window = open_window()  # first: making the environment sets SDL_VIDEODRIVER's default
+    try:
+        env = gym.make(env_id, render_mode="debug_rgb_array", disable_env_checker=True)
+    except BaseException:
+        window.close()
+        raise
     core: BatchedCore = env.unwrapped.core
-    window = HumanWindow()
     held: set[int] = set()
-    env.reset(seed=seed)
     actions: list[Any] = []
     steps = frames = 0
     final_info = None
     try:
+        env.reset(seed=seed)
         while max_frames is None or frames < max_frames:
             frames += 1
             window.show(env.render(), f"seed {seed}", core.render_fps(0) if realtime else 0)
@@ -196,7 +235,14 @@ def main(script: str, argv: list[str] | None = None, **play_kwargs: Any) -> Play
     args = parser.parse_args(argv)
     if args.seed < 0:
         parser.error("--seed must be >= 0")
-    result = play(env_id, controls, seed=args.seed, **play_kwargs)
+    problem = missing_display(os.environ)
+    try:
+        if problem is not None:
+            raise DisplayError(problem)
+        result = play(env_id, controls, seed=args.seed, **play_kwargs)
+    except DisplayError as err:
+        print(f"{script}: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
     for line in statistics(result):
         print(line)
     return result
