@@ -613,10 +613,14 @@ RESULT_NEUTRAL = {  # config keys (a block: every key in it) that no record of a
     "run.wandb": "where the scalars also go; TensorBoard, training.csv and the evaluation records are the same",
     "env.check_seeding": "whether an environment that ignores seeds is refused; a run that goes on is the same",
 }
+# keys a resume asked for on the command line accepts although they change the floating-point rounding of what
+# follows (not the experiment: they are outside the config digest), and what the resume says of them
+ROUNDING_ONLY = {
+    "run.torch_threads": "the thread count changes the rounding of the updates (the weights differ by ~1e-5 after "
+    "one update), so from here on the run is not bit for bit the one an uninterrupted run would have been",
+}
 # keys one might take for settings that no record depends on, and the record they change (said when refused)
 CHANGE_RECORDS = {
-    "run.torch_threads": "the thread count changes the floating-point rounding of the updates (the weights differ "
-    "after one update), so the run would not go on as it was trained",
     "run.device": "another device computes other floats",
     "run.method": "its name is in every record",
     "run.task": "its name is in every record",
@@ -625,12 +629,14 @@ CHANGE_RECORDS = {
 }
 
 
-def resume_may_change(key: str, lengthen: bool = True) -> bool:
+def resume_may_change(key: str, lengthen: bool = True, rounding: bool = True) -> bool:
     """Whether a run that goes on (``scripts/train.py --resume``, a sweep's resume, a checkpoint under a newer
     ``config.yaml``) may take a new value of the dotted config ``key``: the settings no record depends on
-    (:data:`RESULT_NEUTRAL`, a block's keys included) and, where the run can be lengthened (``lengthen``),
-    :data:`LENGTH_KEY`. Any other change would make the run's records those of no single config."""
-    if lengthen and key == LENGTH_KEY:
+    (:data:`RESULT_NEUTRAL`, a block's keys included), where the caller accepts it (``rounding``: a resume asked
+    for by hand, not a sweep's, which keeps its runs bit for bit) the settings that change only the rounding
+    (:data:`ROUNDING_ONLY`), and, where the run can be lengthened (``lengthen``), :data:`LENGTH_KEY`. Any other
+    change would make the run's records those of no single config."""
+    if lengthen and key == LENGTH_KEY or rounding and key in ROUNDING_ONLY:
         return True
     return any(key == neutral or key.startswith(neutral + ".") for neutral in RESULT_NEUTRAL)
 
@@ -654,7 +660,7 @@ def resume_config(saved: Config, overrides: Iterable[str], where: str | Path) ->
     refused = [key for key in differing_keys(config_to_dict(saved), config_to_dict(new)) if not resume_may_change(key)]
     if refused:
         why = "".join(f"; {key}: {CHANGE_RECORDS[key]}" for key in refused if key in CHANGE_RECORDS)
-        neutral = ", ".join(RESULT_NEUTRAL)
+        neutral = ", ".join([*RESULT_NEUTRAL, *ROUNDING_ONLY])
         raise ConfigError(
             f"{', '.join(refused)} cannot be changed on resume: the run goes on with the config saved in {where}"
             f"{why}; a resume may set {LENGTH_KEY} (to lengthen the run) and the settings no record depends on "

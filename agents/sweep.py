@@ -376,7 +376,7 @@ def config_differences(saved: Config, expanded: Config) -> list[str]:
     return [
         f"{key}: saved {_show(old.get(key, missing))}, now {_show(new.get(key, missing))}"
         for key in keys
-        if old.get(key, missing) != new.get(key, missing) and not resume_may_change(key, lengthen=False)
+        if old.get(key, missing) != new.get(key, missing) and not resume_may_change(key, lengthen=False, rounding=False)
     ]
 
 

@@ -5,8 +5,8 @@ and how many rows of training.csv and eval/episodes.csv logged past it are dropp
 (exit 0). ``--resume DIR --set run.total_steps=N`` lengthens a run, finished or not, to N steps; the schedules that
 decay over the whole run go on from their current values to their final values at the new end. Besides that, a
 resume takes only the settings no record depends on (``--set run.progress_bar=false``, run.checkpoint_interval,
-run.keep_checkpoints, run.wandb.*, env.check_seeding: agents.config.RESULT_NEUTRAL), which config.yaml keeps from
-then on; any other key is refused, by name.
+run.keep_checkpoints, run.wandb.*, env.check_seeding: agents.config.RESULT_NEUTRAL) and run.torch_threads (with a
+note: the rounding changes from there on), which config.yaml keeps from then on; any other key is refused, by name.
 
 Exit status: 0 done (or finished already), 1 the run stopped on a non-finite loss or parameter or a failed write (the
 message names the update or file; the newest checkpoint is intact), 2 bad arguments, config or run directory (a
@@ -36,7 +36,15 @@ import yaml
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
-from agents.config import Config, ConfigError, load_config, resume_config, rounding_notice, sets_length  # noqa: E402
+from agents.config import (  # noqa: E402
+    ROUNDING_ONLY,
+    Config,
+    ConfigError,
+    load_config,
+    resume_config,
+    rounding_notice,
+    sets_length,
+)
 from agents.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
 from agents.sweep import SweepError, SweepRun, load_panel, run_coordinates, select_runs  # noqa: E402
 from agents.tracking import TrackingError  # noqa: E402
@@ -98,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{key}: {_yaml(old)} -> {_yaml(new)}" for key, (old, new) in trainer.settings_changed.items()
         )
         print(f"settings changed on resume (no record depends on them): {changes}", flush=True)
+    for key in sorted(set(trainer.settings_changed) & set(ROUNDING_ONLY)):
+        print(f"note: {key}: {ROUNDING_ONLY[key]}", flush=True)
     if trainer.extension is not None:
         print(_extension_message(trainer.extension), flush=True)
     notice = rounding_notice(trainer.config)

@@ -28,7 +28,8 @@ def _keys(tree: object, prefix: str = "") -> list[str]:
 
 def test_only_the_length_and_the_settings_no_record_depends_on_may_change() -> None:
     """Every other key decides a record: the model, the data, the seeds, the names in the rows, when evaluations
-    happen, and the floats themselves (run.torch_threads and run.device change the rounding)."""
+    happen, and the floats themselves (run.device). run.torch_threads changes only the rounding: a resume by hand
+    takes it (saying so), a sweep's does not."""
     changeable = {key for key in _keys(config_to_dict(Config())) if resume_may_change(key)}
     assert changeable == {
         "run.total_steps",
@@ -40,10 +41,12 @@ def test_only_the_length_and_the_settings_no_record_depends_on_may_change() -> N
         "run.wandb.group",
         "run.wandb.mode",
         "env.check_seeding",
+        "run.torch_threads",
     }
+    assert not resume_may_change("run.torch_threads", rounding=False)
     assert not resume_may_change("run.total_steps", lengthen=False)  # the sweep does not lengthen runs
     assert resume_may_change("run.wandb", lengthen=False)  # a whole neutral block
-    assert not any(resume_may_change(key) for key in ("run.torch_threads", "run.method", "eval.interval", "grid"))
+    assert not any(resume_may_change(key) for key in ("run.device", "run.method", "eval.interval", "grid"))
 
 
 def test_a_checkpoint_loads_under_a_config_yaml_whose_neutral_settings_changed() -> None:
@@ -51,8 +54,8 @@ def test_a_checkpoint_loads_under_a_config_yaml_whose_neutral_settings_changed()
     saved = config_to_dict(config)
     saved["run"]["progress_bar"], saved["run"]["keep_checkpoints"], saved["run"]["wandb"]["project"] = True, 7, "p"
     assert check_checkpoint_config({"config": saved}, config, "update_0000001.pt") is None
-    saved["run"]["torch_threads"] = 3
-    with pytest.raises(ValueError, match=r"\(differing: run.torch_threads\)"):
+    saved["run"]["seed"] = 3
+    with pytest.raises(ValueError, match=r"\(differing: run.seed\)"):
         check_checkpoint_config({"config": saved}, config, "update_0000001.pt")
 
 

@@ -135,8 +135,8 @@ def test_extending_a_finished_run_trains_exactly_the_added_updates(
         ("run.total_steps=190", "give at least 192 to add an update"),
         ("run.total_steps=1.5e2", "run.total_steps=150 does not lengthen the run"),
         ("run.total_steps=fast", "run.total_steps='fast' is invalid: expected an int"),
-        ("run.torch_threads=2", "run.torch_threads cannot be changed on resume"),
-        ("run.torch_threads=2", "the thread count changes the floating-point rounding"),
+        ("run.device=cuda:7", "run.device cannot be changed on resume"),
+        ("run.device=cuda:7", "another device computes other floats"),
         ("run.method=other", "run.method cannot be changed on resume"),
         ("eval.interval=1", "eval.interval cannot be changed on resume"),
         ("grid.run.seed=[1, 2]", "grid.run.seed cannot be changed on resume"),
@@ -219,6 +219,32 @@ def test_a_resume_takes_the_settings_no_record_depends_on_and_ends_as_an_uninter
     assert [p.name for p in sorted((run_dir / "checkpoints").iterdir())] == [f"update_{u:07d}.pt" for u in (2, 3, 4)]
     assert train_script.main(["--resume", str(run_dir), "--set", "run.progress_bar=true"]) == 0
     assert "already finished (256 steps of 256); nothing changed" in capsys.readouterr().out
+
+
+def test_a_resume_by_hand_takes_another_thread_count_and_says_it_ends_bit_exactness(
+    tmp_path: Path, config_file: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """A job restarted on a machine with other cores: run.torch_threads is outside the experiment (the config
+    digest), so a resume takes it, says that the run's floats now differ from an uninterrupted run's, records it,
+    and the checkpoint written before still loads under the new config.yaml."""
+    from agents.config import load_config
+    from agents.trainer import Trainer
+    from tests.support.interrupt import kill_after
+
+    run_dir = tmp_path / "run"
+    killed = Trainer(load_config(config_file, RESUMABLE), run_dir)
+    kill_after(killed, 3)
+    with pytest.raises(KeyboardInterrupt):
+        killed.train()
+    capsys.readouterr()
+    assert train_script.main(["--resume", str(run_dir), "--set", "run.torch_threads=2"]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "run.torch_threads: 1 -> 2" in out and "note: run.torch_threads: the thread count changes the rounding" in out
+    )
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["run"]["torch_threads"] == 2
+    (resumed,) = json.loads((run_dir / "run_info.json").read_text())["resumed"]
+    assert resumed["changed"] == {"run.torch_threads": [1, 2]}
 
 
 def test_an_encoder_that_does_not_fit_names_the_environments_own_observation_space(
