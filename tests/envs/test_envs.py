@@ -367,19 +367,18 @@ def test_actions_outside_the_space_are_refused_without_changing_any_state(env_id
         np.testing.assert_array_equal(image_of(core.observations()), image_of(core_twin.observations()))
 
 
-def test_readme_table_names_every_id_with_its_spaces() -> None:
-    """The README's environment table: one row per id, its action space, and its observation with the real keys."""
+def test_the_environments_page_table_names_every_id_with_its_spaces() -> None:
+    """docs/environments.md's table of ids: one row per id, its action space, and its observation with the real keys."""
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    table = readme[readme.index("## Environments") : readme.index("## Training")]
+    table = (Path(__file__).resolve().parents[2] / "docs" / "environments.md").read_text()
 
     def describe(space: gym.spaces.Box) -> str:
         return f"{'x'.join(map(str, space.shape))} {space.dtype}"
 
     for env_id in ALL_IDS:
         rows = [line for line in table.splitlines() if line.startswith(f"| `{env_id}` |")]
-        assert len(rows) == 1, f"{env_id}: {len(rows)} rows in the README's environment table"
+        assert len(rows) == 1, f"{env_id}: {len(rows)} rows in docs/environments.md's table"
         actions, observation = (cell.strip() for cell in rows[0].split("|")[3:5])
         core = make_core(env_id)
         action_space = core.single_action_space

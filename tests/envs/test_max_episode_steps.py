@@ -169,12 +169,11 @@ def test_time_limited_episodes_last_exactly_max_episode_steps(env_id: str, optio
         assert length == env.unwrapped.max_episode_steps == expected(env_id, options)
 
 
-def test_the_readme_example_gives_the_figures_it_names() -> None:
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    section = readme[readme.index("## Environments") :]
-    block = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+def test_the_environments_page_example_gives_the_figures_it_names() -> None:
+    page = (Path(__file__).resolve().parents[2] / "docs" / "environments.md").read_text()
+    block = re.search(r"```python\n(.*?)```", page, re.S).group(1)
     named = int(re.search(r"^env\.unwrapped\.max_episode_steps  # (\d+):", block, re.M).group(1))
     scope: dict[str, Any] = {}
-    exec(block, scope)  # the README's own example
+    exec(block, scope)  # the page's own example
     assert scope["env"].unwrapped.max_episode_steps == named == expected("MortarMayhem-Grid-v0", {"command_count": [5]})
     assert scope["vec"].max_episode_steps.tolist() == [named] * scope["vec"].num_envs
