@@ -22,8 +22,8 @@ import yaml
 
 from agents.actor import rollout_copy
 from agents.config import LENGTH_KEY, Config, config_from_dict, config_to_dict, differing_keys, resume_may_change
-from agents.io import atomic_write_bytes, content_record
 from agents.models import ActorCritic, observation_fields
+from agents.runtime.io import atomic_write_bytes, content_record
 
 CHECKPOINT_FORMAT = 2  # of the saved state (the dict); the file around it is described by CHECKPOINT_MAGIC
 CHECKPOINT_GLOB = "update_*.pt"

@@ -25,18 +25,8 @@ import torch
 from agents.actor import Actor, Outcome
 from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
 from agents.config import Config, check_disjoint_seeds, is_device_name
-from agents.faults import active_faults
-from agents.io import (
-    atomic_write_bytes,
-    atomic_write_text,
-    content_record,
-    exclusive_lock,
-    provenance,
-    write_json_atomic,
-)
 from agents.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
 from agents.models import ActorCritic
-from agents.preemption import deferred_signals
 from agents.results import (
     EPISODE_COLUMNS,
     TRAINING_COLUMNS,
@@ -47,6 +37,16 @@ from agents.results import (
     read_episodes,
 )
 from agents.results import summarize as summarize_episodes
+from agents.runtime.faults import active_faults
+from agents.runtime.io import (
+    atomic_write_bytes,
+    atomic_write_text,
+    content_record,
+    exclusive_lock,
+    provenance,
+    write_json_atomic,
+)
+from agents.runtime.preemption import deferred_signals
 
 RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
 LOCK_FILE = ".lock"  # in an evaluation's results directory: held while it is read and while it is merged into

@@ -3,8 +3,8 @@ intervals across runs (:mod:`agents.results`, :mod:`agents.stats`).
 
 Figures are built on ``matplotlib.figure.Figure`` with an Agg canvas (no pyplot, no global backend switch; matplotlib
 is imported inside the functions), returned for display and written as PNG and PDF through
-:func:`agents.io.atomic_write_bytes`. Every method keeps one colour: the known agents have fixed Okabe-Ito colours,
-any other method takes the next spare colour in the sorted order of the unknown names.
+:func:`agents.runtime.io.atomic_write_bytes`. Every method keeps one colour: the known agents have fixed Okabe-Ito
+colours, any other method takes the next spare colour in the sorted order of the unknown names.
 
 Methods are labelled as in the paper (:data:`METHOD_LABELS`: PPO, GRU-PPO, 4-Stack, ...), tasks by their environment
 id and non-default options (:func:`task_title`). A metric with a known range (:mod:`agents.metrics`: success and
@@ -25,8 +25,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from agents import results
-from agents.io import atomic_write_bytes
 from agents.metrics import METRICS, SPEC_COLUMN, metric_of, read_metric_spec
+from agents.runtime.io import atomic_write_bytes
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -18,7 +18,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from agents.io import now
+from agents.runtime.io import now
 from agents.sweep import (
     NEW,
     PARTIAL,

@@ -80,9 +80,9 @@ from agents.config import (
     resume_may_change,
     with_neutral_settings,
 )
-from agents.faults import FaultSpecError, active_faults
-from agents.io import atomic_write_text, create_text_once, now, provenance, write_json_atomic
-from agents.preemption import EXIT_PREEMPTED, StopRequests, signal_name
+from agents.runtime.faults import FaultSpecError, active_faults
+from agents.runtime.io import atomic_write_text, create_text_once, now, provenance, write_json_atomic
+from agents.runtime.preemption import EXIT_PREEMPTED, StopRequests, signal_name
 
 NEW, PARTIAL, FINISHED, RUNNING = "new", "partial", "finished", "running"
 PREEMPTED = "preempted"  # an outcome: the run stopped at a checkpoint on a signal (resumable, not failed)
@@ -560,9 +560,9 @@ def launch_local(
     """Train every new or partial run, ``jobs`` processes at a time, each with ``cores // jobs`` torch threads (fixed
     when the run is created). Each run's output goes to ``<run>/stdout.log`` (appended, attempt after attempt). A
     failed run does not stop the others; the outcomes say which failed. Interrupted (Ctrl-C), the runs in progress
-    are stopped and resume on the next call. Pre-empted (SIGTERM or SLURM's warning signal, :mod:`agents.preemption`),
-    it passes the signal on to the running runs, which checkpoint and exit (outcome ``preempted``), and starts no
-    other."""
+    are stopped and resume on the next call. Pre-empted (SIGTERM or SLURM's warning signal,
+    :mod:`agents.runtime.preemption`), it passes the signal on to the running runs, which checkpoint and exit (outcome
+    ``preempted``), and starts no other."""
     try:
         active_faults()  # the workers inherit MEMGYM_FAULT: a malformed one is refused once, here
     except FaultSpecError as err:
@@ -990,7 +990,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if len(args) != 1:
         print("usage: python -m agents.sweep RUN_DIR", file=sys.stderr)
         return 2
-    from agents.preemption import Preempted
+    from agents.runtime.preemption import Preempted
     from agents.trainer import TrainingDiverged, WriteFailed
 
     try:

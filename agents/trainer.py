@@ -11,7 +11,7 @@ reset with its seed and replayed, which reproduces the environment state because
 its seed and actions (a digest of the observations checks this). With the same seed on CPU, a resumed run ends with
 the same weights, logs and records as an uninterrupted one.
 
-Faults (docs/reliability.md): a pre-emption signal (:mod:`agents.preemption`) ends the run after the update in
+Faults (docs/reliability.md): a pre-emption signal (:mod:`agents.runtime.preemption`) ends the run after the update in
 progress, with a checkpoint (:class:`Preempted`); a non-finite loss, gradient or weight stops it at that update
 (:class:`TrainingDiverged`) and a failed write at that file (:class:`WriteFailed`), the newest checkpoint intact.
 Every checkpoint records what ``training.csv`` and ``eval/episodes.csv`` held at its step (:func:`run_records`), and a
@@ -45,7 +45,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from agents import faults
 from agents.actor import Actor, refresh_copy, rollout_copy
 from agents.buffer import RolloutBuffer
 from agents.checkpoint import (
@@ -81,13 +80,14 @@ from agents.evaluation import (
     seed_list,
     write_records,
 )
-from agents.io import atomic_write_text, content_record, now, provenance, write_json_atomic
 from agents.metrics import metric_of
 from agents.ppo import explained_variance, gae_advantages, ppo_update
-from agents.preemption import Preempted, StopRequests, signal_name
 from agents.results import TRAINING_COLUMNS, config_digest
+from agents.runtime import faults
+from agents.runtime.io import atomic_write_text, content_record, now, provenance, write_json_atomic
+from agents.runtime.preemption import Preempted, StopRequests, signal_name
+from agents.runtime.tracking import TrackingError, WandbWriter, scalar_writer, start_wandb
 from agents.sequences import split_sequences
-from agents.tracking import TrackingError, WandbWriter, scalar_writer, start_wandb
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
 
@@ -223,9 +223,10 @@ class Trainer:
         """Run the remaining updates; returns one metrics dict per update run by this call. A finished run is left
         exactly as it is (no resume record, no event file): lengthen it with ``Trainer.resume(dir, overrides)``.
 
-        Stops with :class:`Preempted` after a pre-emption signal (:mod:`agents.preemption`: the update in progress
-        finishes and is checkpointed first), :class:`TrainingDiverged` at a non-finite loss, gradient or parameter,
-        and :class:`WriteFailed` when a file cannot be written; the newest checkpoint is intact in every case."""
+        Stops with :class:`Preempted` after a pre-emption signal (:mod:`agents.runtime.preemption`: the update in
+        progress finishes and is checkpointed first), :class:`TrainingDiverged` at a non-finite loss, gradient or
+        parameter, and :class:`WriteFailed` when a file cannot be written; the newest checkpoint is intact in every
+        case."""
         if self.finished:
             return []
         wandb_writer = self._start_tracking()  # first: a W&B that cannot start stops the run before any file

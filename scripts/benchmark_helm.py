@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 import torch  # noqa: E402
 
 from agents.helm import HelmBranch  # noqa: E402
-from agents.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
 
 # name: (layers, width, heads, vocab, mem_len)
 SIZES = {

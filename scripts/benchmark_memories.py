@@ -29,8 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 import torch  # noqa: E402
 
 from agents.config import ModelConfig  # noqa: E402
-from agents.io import SCRATCH, ResultFile, add_out_argument, atomic_write_bytes, json_table, provenance  # noqa: E402
 from agents.memory import build_memory  # noqa: E402
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, atomic_write_bytes, json_table, provenance  # noqa: E402
 
 MEMORIES = ("gru", "lru", "ffm", "mamba", "mamba2")
 LENGTHS = (64, 128, 256, 512, 1024, 2048, 4096)

@@ -27,7 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from agents.io import SCRATCH, ResultFile, add_out_argument  # noqa: E402
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument  # noqa: E402
 
 DEFAULT_OUT = SCRATCH / "reliability.json"
 SECTION = "fuzzed_environments"

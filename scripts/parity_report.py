@@ -18,7 +18,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from agents.io import SCRATCH, ResultFile, add_out_argument, json_table  # noqa: E402
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table  # noqa: E402
 from scripts.reference import REFERENCE_IDS  # noqa: E402
 from scripts.reference.parity import replay, replay_batched  # noqa: E402
 

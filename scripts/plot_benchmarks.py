@@ -21,7 +21,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from agents.io import SCRATCH, ResultFile, add_out_argument, repo_relative  # noqa: E402
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, repo_relative  # noqa: E402
 from scripts.benchmark_envs import DEFAULT_OUT as DEFAULT_JSON  # noqa: E402
 from scripts.benchmark_envs import report_partial  # noqa: E402
 

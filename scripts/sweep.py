@@ -50,7 +50,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.config import NAMED_AXES, ConfigError  # noqa: E402
-from agents.preemption import EXIT_PREEMPTED  # noqa: E402
+from agents.runtime.preemption import EXIT_PREEMPTED  # noqa: E402
 from agents.slurm import launch_slurm, wait_for_jobs  # noqa: E402
 from agents.sweep import (  # noqa: E402
     PREEMPTED,

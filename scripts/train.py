@@ -13,7 +13,7 @@ message names the update or file; the newest checkpoint is intact), 2 bad argume
 damaged checkpoint with no intact one to fall back to is named), or a W&B run (run.wandb) that could not start (before
 anything of the run was written: the same command works once it can), 76 pre-empted: SIGTERM or SLURM's warning signal
 (SIGUSR2) stopped the run after its current update, which was checkpointed (resume it). Faults can be injected for
-tests through the MEMGYM_FAULT environment variable (agents/faults.py).
+tests through the MEMGYM_FAULT environment variable (agents/runtime/faults.py).
 
 The run directory (default ``runs/<config name>/<timestamp>-seed<seed>``) receives the resolved config, run_info.json
 (seed, versions, git revision, resumes and extensions), training.csv, TensorBoard events and checkpoints.
@@ -45,9 +45,9 @@ from agents.config import (  # noqa: E402
     rounding_notice,
     sets_length,
 )
-from agents.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
+from agents.runtime.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
+from agents.runtime.tracking import TrackingError  # noqa: E402
 from agents.sweep import SweepError, SweepRun, load_panel, run_coordinates, select_runs  # noqa: E402
-from agents.tracking import TrackingError  # noqa: E402
 from agents.trainer import Trainer, TrainingDiverged, WriteFailed, default_run_dir  # noqa: E402
 
 

@@ -5,7 +5,7 @@ Two sides, one package:
 * run inside the reference's isolated venv (gymnasium 0.29, memory_gym; our ``envs`` cannot be imported there):
   ``recorder`` (records and verifies the traces), ``bench`` (the reference's steps/s), and what they use,
   ``trace_format`` (digests, JSON files), ``protocol`` (the single-env timing protocol) and this module. These import
-  only the standard library, numpy, gymnasium, memory_gym, this package and ``agents.io``;
+  only the standard library, numpy, gymnasium, memory_gym, this package and ``agents.runtime.io``;
 * run with the project's python: ``venv`` (builds the reference venv and starts the two modules above in it) and
   ``parity`` (replays the traces through our ``envs``). Nothing here imports them, so the reference venv never
   reaches ``envs``.

@@ -1,7 +1,7 @@
 """The format of the reference traces: observation digests and the deterministic gzip JSON files.
 
 Imported by the recorder (inside the isolated reference venv) and by the parity comparison (project venv), so both
-sides compute observation digests in exactly the same way. Standard library, numpy and ``agents.io`` only.
+sides compute observation digests in exactly the same way. Standard library, numpy and ``agents.runtime.io`` only.
 
 Digest convention: ``image_digest`` hashes an ordinary (row, column, channel) uint8 image. The reference package
 returns its observation as obs[x][y][c]; the recorder transposes it with ``obs.transpose(1, 0, 2)`` before hashing.
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.io import atomic_write_bytes
+from agents.runtime.io import atomic_write_bytes
 from scripts.reference import MP_PATHS_FILE, TRACES_DIR
 
 DIGEST_METHOD = (

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.io import write_json_atomic
+from agents.runtime.io import write_json_atomic
 
 
 def test_write_json_atomic_replaces_and_creates_folders(tmp_path: Path) -> None:

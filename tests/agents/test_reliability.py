@@ -1,6 +1,6 @@
 """What survives a fault: kills at every stage of a checkpoint write, pre-emption signals, truncated and corrupted
 checkpoints and records, a full disk, a failing fsync, NaN/Inf in the loss or the weights, and two evaluations
-writing into one directory. Faults are injected through MEMGYM_FAULT (agents/faults.py), into real runs; a
+writing into one directory. Faults are injected through MEMGYM_FAULT (agents/runtime/faults.py), into real runs; a
 resumed run must end bit for bit as an uninterrupted one."""
 
 from __future__ import annotations
@@ -21,12 +21,13 @@ import pytest
 import torch
 import yaml
 
-from agents import evaluation, faults
+from agents import evaluation
 from agents.checkpoint import DamagedCheckpoint, latest_checkpoint, read_checkpoint, write_checkpoint
 from agents.config import config_from_dict
 from agents.evaluation import evaluate_runs, read_records
-from agents.faults import FaultSpecError, parse_faults
-from agents.preemption import EXIT_PREEMPTED, Preempted, deferred_signals, raising_preempted
+from agents.runtime import faults
+from agents.runtime.faults import FaultSpecError, parse_faults
+from agents.runtime.preemption import EXIT_PREEMPTED, Preempted, deferred_signals, raising_preempted
 from agents.trainer import Trainer, TrainingDiverged, WriteFailed, training_log_text
 from scripts import train as train_script
 from tests.support.interrupt import kill_after

@@ -1,5 +1,5 @@
-"""Where a result table may be written (``agents.io.ResultFile``): committed files only where --out names them, a
-partial run never over a full table, whoever named it, and a table refused at write time kept, not lost."""
+"""Where a result table may be written (``agents.runtime.io.ResultFile``): committed files only where --out names them,
+a partial run never over a full table, whoever named it, and a table refused at write time kept, not lost."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.io import ROOT, SCRATCH, OutputRefused, ResultFile, json_table
+from agents.runtime.io import ROOT, SCRATCH, OutputRefused, ResultFile, json_table
 
 
 def _partial_of(record: dict) -> str:

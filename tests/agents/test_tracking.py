@@ -16,7 +16,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from agents.checkpoint import check_checkpoint_config
 from agents.config import ConfigError, config_from_dict, config_to_dict
-from agents.io import git_revision
+from agents.runtime.io import git_revision
 from agents.trainer import Trainer
 from tests.support.interrupt import kill_after
 
@@ -236,7 +236,7 @@ def test_a_wandb_start_up_failure_exits_2_in_one_line_before_the_run_directory_e
 def test_a_wandb_start_up_failure_on_resume_leaves_the_run_resumable(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from agents.tracking import TrackingError
+    from agents.runtime.tracking import TrackingError
 
     monkeypatch.setitem(sys.modules, "wandb", FakeWandb())
     run_dir = tmp_path / "run"

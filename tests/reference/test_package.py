@@ -21,13 +21,16 @@ REFERENCE_VENV_MODULES = ["__init__", "trace_format", "protocol", "recorder", "b
 CHECKED = [
     *(f"scripts/reference/{module}.py" for module in [*REFERENCE_VENV_MODULES, "venv"]),
     "agents/__init__.py",
-    "agents/io.py",
-    "agents/faults.py",  # the fault-injection hooks of agents/io.py
+    "agents/runtime/__init__.py",  # imported with agents.runtime.io
+    "agents/runtime/io.py",
+    "agents/runtime/faults.py",  # the fault-injection hooks of agents/runtime/io.py
+    "agents/runtime/preemption.py",  # re-exported by agents/runtime/__init__.py
 ]
 ALLOWED_THIRD_PARTY = {"numpy", "gymnasium", "memory_gym"}
 ALLOWED_FIRST_PARTY = {
-    "agents.io",
-    "agents.faults",
+    "agents.runtime.io",
+    "agents.runtime.faults",
+    "agents.runtime.preemption",
     "scripts.reference",
     *(f"scripts.reference.{m}" for m in REFERENCE_VENV_MODULES),
 }

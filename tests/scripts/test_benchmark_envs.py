@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.io import ROOT, SCRATCH
+from agents.runtime.io import ROOT, SCRATCH
 from scripts import benchmark_envs
 from scripts.reference import REFERENCE_IDS
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.io import SCRATCH
+from agents.runtime.io import SCRATCH
 from scripts import benchmark_helm
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from agents.io import ROOT, SCRATCH
+from agents.runtime.io import ROOT, SCRATCH
 from scripts import parity_report
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
-from agents.io import ROOT, SCRATCH
+from agents.runtime.io import ROOT, SCRATCH
 from scripts import plot_benchmarks
 
 COMMITTED = ROOT / "results" / "benchmarks"

@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from agents.checkpoint import checkpoint_update, latest_checkpoint
-from agents.preemption import EXIT_PREEMPTED
+from agents.runtime.preemption import EXIT_PREEMPTED
 from agents.sweep import FINISHED, load_panel, prepare_run, run_lock, run_status, train_run
 from scripts import sweep as sweep_script
 from tests.support.tiny_run import tiny_run, with_run

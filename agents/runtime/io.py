@@ -25,9 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from agents.faults import at_write
+from agents.runtime.faults import at_write
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 COMMITTED_RESULTS = ROOT / "results"  # committed result tables: replaced only where --out names them
 SCRATCH = ROOT / "runs"  # git-ignored: where result tables go by default
 
@@ -39,7 +39,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    at_write(path, "open")  # the fault-injection hooks (MEMGYM_FAULT, agents/faults.py): no-ops unless set
+    at_write(path, "open")  # the fault-injection hooks (MEMGYM_FAULT, agents/runtime/faults.py): no-ops unless set
     handle = tempfile.NamedTemporaryFile("wb", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False)
     try:
         with handle:

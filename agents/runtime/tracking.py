@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from agents.config import Config, config_to_dict
-from agents.io import now, provenance, write_json_atomic
+from agents.runtime.io import now, provenance, write_json_atomic
 
 WANDB_FILE = "wandb.json"  # the run directory's W&B run id, and what every start resolved
 # W&B's environment variable of each setting the config also has (the directory: no config field, <run> by default)
