@@ -6,8 +6,9 @@
     vector obs, previous action (one-hot), previous reward ---+-> concat -> memory -> body FC -> policy FC -> heads
                                 -> Linear(128) + ReLU --------+                               -> value FC  -> value
 
-The encoder and the memory module come from one registry each (:data:`ENCODERS`, and
-:data:`agents.memory.MEMORY_MODULES` with the memory interface), which the config validation reads too. With frame
+The encoder and the memory module come from one registry each (:data:`IMAGE_ENCODERS` for the image encoders among
+the config's choices, :data:`agents.config.ENCODERS`, and :data:`agents.memory.MEMORY_MODULES` with the memory
+interface, which the config validation reads too). With frame
 stacking the image (and vector) input holds the last k observations along the channels; with the HELM branch, its
 cached output (:mod:`agents.helm`) joins the CNN features. Non-memory layers always see a flat batch of real steps;
 only the memory module sees the (sequences, length) layout, which it takes from the padding mask of the minibatch.
@@ -194,13 +195,6 @@ class ObservationDecoder(nn.Module):
 
 # The one registry of image encoders: name -> class taking the (H, W, C) image shape, with ``output_size``.
 IMAGE_ENCODERS: dict[str, Callable[[tuple[int, int, int]], nn.Module]] = {"nature_cnn": NatureCNN}
-# ``model.encoder``'s choices: an image encoder (the vector inputs then go through one layer of
-# ``vector_encoder_size``), or ``mlp`` for observations without an image (the vector inputs go through an MLP of
-# ``mlp_sizes``).
-ENCODERS: dict[str, str] = {
-    **{name: "image observations" for name in IMAGE_ENCODERS},
-    "mlp": "vector observations: an MLP of model.mlp_sizes",
-}
 
 
 def mlp(input_size: int, sizes: Sequence[int]) -> nn.Sequential:

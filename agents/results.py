@@ -38,7 +38,6 @@ if TYPE_CHECKING:
 __all__ = [
     "CONFIG_COLUMN",
     "EPISODE_COLUMNS",
-    "NOT_IN_DIGEST",
     "OPTIONS_COLUMN",
     "TRAINING_COLUMNS",
     "MethodScores",
@@ -274,45 +273,21 @@ def _check_unique(records: Records, keys: Sequence[str], what: str) -> None:
 
 
 # ------------------------------------------------------------------------------------ what defines an experiment
-NOT_IN_DIGEST = {  # config keys that do not change the experiment a run belongs to, and why
-    "run.seed": "seed: the runs of a cell are its seeds",
-    "model.helm.seed": "seed of HELM's random projection (and random transformer): another draw, not another agent",
-    "eval.seed": "seed of the evaluation's action sampling",
-    "eval.seeds": "which novel seeds: a sample of the same level distribution",
-    "eval.repetitions": "episodes per novel seed: how precise a score is, not what it measures",
-    "eval.interval": "how often the curve is sampled",
-    "run.method": "a name: the cell's own key",
-    "run.task": "a name: the cell's own key",
-    "run.device": "where the run computes",
-    "run.torch_threads": "how fast the run computes",
-    "run.checkpoint_interval": "bookkeeping (a resumed run replays the same steps)",
-    "run.keep_checkpoints": "bookkeeping",
-    "run.progress_bar": "display",
-    "run.wandb.project": "where the logs also go",
-    "run.wandb.entity": "where the logs also go",
-    "run.wandb.group": "where the logs also go",
-    "run.wandb.mode": "where the logs also go",
-    "env.vectorization": "how a gymnasium environment's copies run: the same episodes either way",
-    "env.check_seeding": "whether an environment that ignores seeds is refused (a run that went ahead is the same)",
-    "env.metric.label": "a name",
-    "grid": "a run's config holds no grid",
-}
-
-
 def experiment_settings(config: Config, greedy: bool | None = None, changed_only: bool = True) -> dict[str, Any]:
-    """What defines the experiment of a run, as ``{dotted key: value}``: every config key but :data:`NOT_IN_DIGEST`,
+    """What defines the experiment of a run, as ``{dotted key: value}``: every config key but those the config's one
+    table leaves out (:data:`agents.config.NOT_IN_DIGEST`),
     the env's reset options resolved (``env.options.<name>``), and ``eval.greedy`` as the evaluation used it
     (``greedy``; default: the config's). ``changed_only``: only the values that differ from the defaults (of
     :class:`agents.config.Config` and of the env's options), so that a field added to the config later leaves the
     settings of existing configs unchanged."""
-    from agents.config import Config, config_to_dict, resolved_options
+    from agents.config import Config, config_to_dict, in_digest, resolved_options
 
     def flat(config: Config, changed: bool, greedy: bool | None = None) -> dict[str, Any]:
         tree = config_to_dict(config)
         tree["env"]["options"] = resolved_options(config.env.id, config.env.options, changed_only=changed)
         if greedy is not None:
             tree["eval"]["greedy"] = bool(greedy)
-        return {key: value for key, value in _flatten(tree).items() if key not in NOT_IN_DIGEST}
+        return {key: value for key, value in _flatten(tree).items() if in_digest(key)}
 
     found = flat(config, changed_only, greedy)
     if not changed_only:
@@ -324,8 +299,8 @@ def experiment_settings(config: Config, greedy: bool | None = None, changed_only
 def config_digest(config: Config, greedy: bool | None = None) -> str:
     """The ``config_digest`` column: ``c`` and the first 12 hex digits of the SHA-256 of :func:`experiment_settings`
     (changed values only) as sorted, compact JSON; the letter keeps CSV readers from taking it for a number. Runs
-    that differ only in seeds, names, device, threads or bookkeeping (:data:`NOT_IN_DIGEST`) share it; the same
-    config gives the same digest in any process and on any machine."""
+    that differ only in seeds, names, device, threads or bookkeeping (:data:`agents.config.NOT_IN_DIGEST`) share it; the
+    same config gives the same digest in any process and on any machine."""
     text = json.dumps(experiment_settings(config, greedy), sort_keys=True, separators=(",", ":"))
     return "c" + hashlib.sha256(text.encode()).hexdigest()[:12]
 

@@ -38,8 +38,8 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
-from agents.config import ModelConfig
 from agents.memory.base import Memory
 from agents.memory.ffm import FFM
 from agents.memory.lru import LRU
@@ -47,6 +47,9 @@ from agents.memory.mamba import Mamba
 from agents.memory.mamba2 import Mamba2
 from agents.memory.recurrent import NoMemory, RecurrentMemory
 from agents.memory.transformer import TransformerXL
+
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
 
 # The one registry of memory modules (the config validation reads its keys): name -> builder(config, input size).
 MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], Memory]] = {

@@ -13,13 +13,16 @@ y = z * sigmoid(O u) + (K u) * (1 - sigmoid(O u)), added to the block's input. T
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 
-from agents.config import FfmConfig
 from agents.layers import orthogonal
 from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
+
+if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
+    from agents.config import FfmConfig
 
 
 class FFMBlock(nn.Module):

@@ -11,14 +11,17 @@ to the block's input (u_t is the layer-normed input). The state is the complex h
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from agents.config import LruConfig
 from agents.layers import orthogonal
 from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
+
+if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
+    from agents.config import LruConfig
 
 
 class LRUBlock(nn.Module):

@@ -18,14 +18,17 @@ flattened into one vector, zeros at an episode start (a convolution over zero-pa
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from agents.config import MambaConfig
 from agents.layers import orthogonal
 from agents.memory.scan import Layout, ScanMemory, full_precision, widen
+
+if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
+    from agents.config import MambaConfig
 
 
 def causal_conv(conv: nn.Conv1d, inputs: Tensor, past: Tensor) -> tuple[Tensor, Tensor]:

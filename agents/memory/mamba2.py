@@ -23,15 +23,18 @@ State per block: the convolution's last ``conv_size - 1`` inputs (conv_size - 1,
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from agents.config import Mamba2Config
 from agents.layers import orthogonal
 from agents.memory.mamba import causal_conv
 from agents.memory.scan import Layout, ScanMemory, full_precision, linear_scan, widen
+
+if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
+    from agents.config import Mamba2Config
 
 
 def state_space_dual(

@@ -42,14 +42,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from agents.config import TrxlConfig
 from agents.layers import HIDDEN_GAIN, compute_dtype, orthogonal
 from agents.memory.base import Memory
+
+if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
+    from agents.config import TrxlConfig
 
 CACHE_DTYPES = {"fp32": torch.float32, "bf16": torch.bfloat16}
 

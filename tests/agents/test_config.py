@@ -314,3 +314,47 @@ def test_cpu_ablation_differs_from_its_panel_by_the_clue_delay_only() -> None:
         expected["run"]["seed"] = point.config.run.seed
         expected["run"]["task"] = "mm_grid_1_delay4"  # the task's label, which names its results
         assert config_to_dict(point.config) == expected
+
+
+def _blocks(cls: type, prefix: str = "") -> dict[str, type]:
+    """Every settings block of a dataclass by its dotted key, the dataclass itself included."""
+    import dataclasses
+    from typing import get_type_hints
+
+    found = {prefix or "(config)": cls}
+    for name, hint in get_type_hints(cls).items():
+        if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+            found.update(_blocks(hint, f"{prefix}.{name}" if prefix else name))
+    return found
+
+
+def test_every_block_of_the_schema_is_a_settings_block_that_checks_itself() -> None:
+    """The loader calls each block's own check: there is no list of block types to keep in step with the schema."""
+    from agents.settings import Settings
+
+    blocks = _blocks(Config)
+    assert {"env", "env.metric", "model", "model.helm", "model.lru", "ppo.learning_rate", "run.wandb"} <= set(blocks)
+    assert all(issubclass(block, Settings) for block in blocks.values()), blocks
+
+
+def test_the_loader_calls_a_blocks_check_with_its_dotted_key() -> None:
+    from dataclasses import dataclass
+
+    from agents.config.building import build
+    from agents.settings import Settings, param
+
+    seen = []
+
+    @dataclass
+    class Probe(Settings):
+        size: int = param(1, "a size", low=1)
+
+        def check(self, prefix: str) -> None:
+            seen.append((prefix, self.size))
+            if self.size == 3:
+                raise ConfigError(f"{prefix}.size=3 is refused by the block itself")
+
+    assert build(Probe, {"size": 2}, prefix="model.probe").size == 2
+    assert seen == [("model.probe", 2)]
+    with pytest.raises(ConfigError, match=r"^model\.probe\.size=3 is refused by the block itself$"):
+        build(Probe, {"size": 3}, prefix="model.probe")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from agents import results, stats
-from agents.config import MAX_TASK_NAME, check_name, dump_config, load_config, task_name
+from agents.config import MAX_TASK_NAME, NOT_IN_DIGEST, check_name, dump_config, load_config, task_name
 from agents.results import EPISODE_COLUMNS, Records, ResultsWarning
 from agents.sweep import load_panel
 from agents.trainer import Trainer
@@ -356,7 +356,7 @@ def test_config_digest_ignores_seeds_and_bookkeeping_only() -> None:
     digests = {override: results.config_digest(load_config(QUICKSTART, [override])) for override in different}
     assert digest not in digests.values() and len(set(digests.values())) == len(different), digests
     assert results.config_digest(base, greedy=True) == digests["eval.greedy=true"], "as the evaluation played"
-    assert set(results.NOT_IN_DIGEST) >= {"run.seed", "run.device", "run.torch_threads", "run.checkpoint_interval"}
+    assert set(NOT_IN_DIGEST) >= {"run.seed", "run.device", "run.torch_threads", "run.checkpoint_interval"}
 
 
 def test_task_names_and_digests_are_the_same_in_another_process() -> None:

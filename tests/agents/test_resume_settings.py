@@ -49,6 +49,21 @@ def test_only_the_length_and_the_settings_no_record_depends_on_may_change() -> N
     assert not any(resume_may_change(key) for key in ("run.device", "run.method", "eval.interval", "grid"))
 
 
+def test_one_table_says_what_a_resume_may_change_and_what_the_digest_leaves_out() -> None:
+    """Every key of the table names a config key or block; a key a resume may change without a new experiment is
+    outside the digest, and the length, which a resume may raise, is inside it (a lengthened run is another one)."""
+    from agents.config import LENGTH_KEY, NOT_IN_DIGEST, RESULT_NEUTRAL, ROUNDING_ONLY, SETTINGS, in_digest
+
+    tree = config_to_dict(Config())
+    keys = set(_keys(tree))
+    for key in SETTINGS:
+        assert key in keys or any(found.startswith(key + ".") for found in keys) or key == "grid", key
+    assert not any(in_digest(key) for key in [*RESULT_NEUTRAL, *ROUNDING_ONLY]) and in_digest(LENGTH_KEY)
+    assert not in_digest("run.wandb.project") and not in_digest("run.wandb")  # a block: every key in it
+    assert in_digest("run.seed_count") and not in_digest("run.seed")  # a key, not a prefix of a word
+    assert set(NOT_IN_DIGEST) == {key for key, setting in SETTINGS.items() if setting.digest_why is not None}
+
+
 def test_a_checkpoint_loads_under_a_config_yaml_whose_neutral_settings_changed() -> None:
     config = config_from_dict(TINY)
     saved = config_to_dict(config)
