@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from agents.models import InputField, join_frames
+from agents.policy.models import InputField, join_frames
 
 STACKED = ("image", "vector")  # the observation fields, stacked along their last (channel) axis
 

@@ -22,11 +22,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from agents.actor import Actor, Outcome
-from agents.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
 from agents.config import Config, check_disjoint_seeds, is_device_name
 from agents.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
-from agents.models import ActorCritic
+from agents.policy.actor import Actor, Outcome
+from agents.policy.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
+from agents.policy.models import ActorCritic
 from agents.results import (
     EPISODE_COLUMNS,
     TRAINING_COLUMNS,

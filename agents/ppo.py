@@ -17,7 +17,7 @@ from torch import Tensor
 
 from agents.buffer import RolloutBuffer
 from agents.config import PPOConfig
-from agents.models import ActorCritic, log_probs_and_entropy
+from agents.policy.models import ActorCritic, log_probs_and_entropy
 from agents.sequences import Sequences, minibatch_ids, pad_sequences
 
 
@@ -110,7 +110,7 @@ def ppo_update(
     old_values, returns = buffer.flat(buffer.values), buffer.flat(buffer.returns)
     advantages = buffer.flat(buffer.advantages)
     reconstruct = config.reconstruction_coef > 0
-    # the auxiliary losses by their logged names, with their weights (agents.models.ActorCritic.evaluate)
+    # the auxiliary losses by their logged names, with their weights (agents.policy.models.ActorCritic.evaluate)
     auxiliary_coefs = {"reconstruction_loss": config.reconstruction_coef, "ground_truth_loss": config.ground_truth_coef}
     ground_truth = None if buffer.ground_truth is None else buffer.flat(buffer.ground_truth)
     if config.advantage_normalization == "batch":

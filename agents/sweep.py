@@ -53,15 +53,6 @@ from typing import Any
 
 import yaml
 
-from agents.checkpoint import (
-    DamagedCheckpoint,
-    checkpoint_damage,
-    checkpoint_update,
-    finished_update,
-    ground_truth_size,
-    latest_checkpoint,
-    run_config,
-)
 from agents.config import (
     GRID_SETTINGS,
     NAMED_AXES,
@@ -79,6 +70,15 @@ from agents.config import (
     read_config_file,
     resume_may_change,
     with_neutral_settings,
+)
+from agents.policy.checkpoint import (
+    DamagedCheckpoint,
+    checkpoint_damage,
+    checkpoint_update,
+    finished_update,
+    ground_truth_size,
+    latest_checkpoint,
+    run_config,
 )
 from agents.runtime.faults import FaultSpecError, active_faults
 from agents.runtime.io import atomic_write_text, create_text_once, now, provenance, write_json_atomic
@@ -843,7 +843,7 @@ def parameter_count(config: Config) -> int:
     if key not in _PARAMETERS:
         import torch
 
-        from agents.models import ActorCritic
+        from agents.policy.models import ActorCritic
 
         core = config.env.make_core(1)
         ground_truth = ground_truth_size(config, core)  # the estimator is trained, so it counts

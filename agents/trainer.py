@@ -1,6 +1,6 @@
 """The training loop: collect -> GAE -> epochs of minibatch updates -> log -> evaluate -> checkpoint.
 
-The environments run in-process as one natively batched core, driven by the actor (:mod:`agents.actor`), which
+The environments run in-process as one natively batched core, driven by the actor (:mod:`agents.policy.actor`), which
 resets a finished slot right after the step that ended its episode with a seed drawn from the training range by the
 trainer's own generator. Every ``eval.interval`` updates (and after the last one) the current policy plays the
 novel seeds through :func:`agents.evaluation.evaluate`; the records go to ``eval/episodes.csv`` and TensorBoard.
@@ -15,7 +15,7 @@ Faults (docs/reliability.md): a pre-emption signal (:mod:`agents.runtime.preempt
 progress, with a checkpoint (:class:`Preempted`); a non-finite loss, gradient or weight stops it at that update
 (:class:`TrainingDiverged`) and a failed write at that file (:class:`WriteFailed`), the newest checkpoint intact.
 Every checkpoint records what ``training.csv`` and ``eval/episodes.csv`` held at its step (:func:`run_records`), and a
-resume takes the newest checkpoint that is intact and matches them (:func:`agents.checkpoint.intact_checkpoint`).
+resume takes the newest checkpoint that is intact and matches them (:func:`agents.policy.checkpoint.intact_checkpoint`).
 
 A run can be lengthened when it resumes (``Trainer.resume(run_dir, ["run.total_steps=N"])``):
 ``config.yaml`` then holds the new length, ``run_info.json`` records the extension, and the schedules that decay over
@@ -45,21 +45,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from agents.actor import Actor, refresh_copy, rollout_copy
 from agents.buffer import RolloutBuffer
-from agents.checkpoint import (
-    DamagedCheckpoint,
-    build_agent,
-    check_checkpoint_config,
-    check_helm,
-    checkpoint_path,
-    checkpoint_update,
-    intact_checkpoint,
-    latest_checkpoint,
-    read_checkpoint,
-    run_config,
-    write_checkpoint,
-)
 from agents.config import (
     LENGTH_KEY,
     Config,
@@ -81,6 +67,20 @@ from agents.evaluation import (
     write_records,
 )
 from agents.metrics import metric_of
+from agents.policy.actor import Actor, refresh_copy, rollout_copy
+from agents.policy.checkpoint import (
+    DamagedCheckpoint,
+    build_agent,
+    check_checkpoint_config,
+    check_helm,
+    checkpoint_path,
+    checkpoint_update,
+    intact_checkpoint,
+    latest_checkpoint,
+    read_checkpoint,
+    run_config,
+    write_checkpoint,
+)
 from agents.ppo import explained_variance, gae_advantages, ppo_update
 from agents.results import TRAINING_COLUMNS, config_digest
 from agents.runtime import faults

@@ -1,4 +1,4 @@
-"""Per-step time of the HELM branch (agents/helm.py) for a batch of slots, and where it goes.
+"""Per-step time of the HELM branch (agents/policy/helm.py) for a batch of slots, and where it goes.
 
     python scripts/benchmark_helm.py [--batch 16] [--steps 50] [--repeats 5] [--sizes small gpt2]
 
@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 
 import torch  # noqa: E402
 
-from agents.helm import HelmBranch  # noqa: E402
+from agents.policy.helm import HelmBranch  # noqa: E402
 from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
 
 # name: (layers, width, heads, vocab, mem_len)

@@ -35,7 +35,6 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
-from agents.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
 from agents.config import (  # noqa: E402
     ROUNDING_ONLY,
     Config,
@@ -45,6 +44,7 @@ from agents.config import (  # noqa: E402
     rounding_notice,
     sets_length,
 )
+from agents.policy.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
 from agents.runtime.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
 from agents.runtime.tracking import TrackingError  # noqa: E402
 from agents.sweep import SweepError, SweepRun, load_panel, run_coordinates, select_runs  # noqa: E402

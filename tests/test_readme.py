@@ -36,7 +36,7 @@ def test_what_the_project_says_it_has_exists() -> None:
     import tomllib
 
     from agents.config import config_from_dict
-    from agents.models import MEMORY_MODULES
+    from agents.policy.models import MEMORY_MODULES
     from agents.trainer import Trainer
 
     description = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["description"]

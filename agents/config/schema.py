@@ -129,7 +129,7 @@ class EnvConfig(Settings):
 class HelmConfig(Settings):
     """The HELM branch: grayscale frame -> random projection -> frozen Hopfield retrieval over a language model's
     token embeddings -> the frozen causal transformer with a memory of the episode's last ``mem_len`` steps.
-    Its output joins the CNN features; it is computed once during the rollout and cached (agents/helm.py)."""
+    Its output joins the CNN features; it is computed once during the rollout and cached (agents/policy/helm.py)."""
 
     lm: str = param(NO_LM, "'none' (no branch), 'random' (a seeded random transformer), a hub name or a local dir")
     beta: float = param(1000.0, "inverse temperature of the Hopfield retrieval (the paper's 1000)", low=0.0)

@@ -1,8 +1,8 @@
 """The memory modules, one module per family, and their one registry (:data:`MEMORY_MODULES`).
 
-A memory sits between the encoders and the body of :class:`agents.models.ActorCritic`. The actor, the rollout buffer,
-the sequence batching and the PPO update only speak this interface (:class:`agents.memory.base.Memory`), so a new
-memory is one new file here and one registry entry:
+A memory sits between the encoders and the body of :class:`agents.policy.models.ActorCritic`. The actor, the rollout
+buffer, the sequence batching and the PPO update only speak this interface (:class:`agents.memory.base.Memory`), so a
+new memory is one new file here and one registry entry:
 
 * ``output_size``: width of its output.
 * **State** (``state_shape``, ``state_dtype``): what a slot carries from one decision to the next, one tensor per

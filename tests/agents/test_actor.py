@@ -9,9 +9,9 @@ import pytest
 import torch
 
 import envs
-from agents.actor import Actor, grayscale
-from agents.checkpoint import build_agent
 from agents.config import config_from_dict
+from agents.policy.actor import Actor, grayscale
+from agents.policy.checkpoint import build_agent
 from agents.trainer import Trainer
 
 

@@ -12,9 +12,9 @@ import pytest
 import yaml
 from PIL import Image, ImageSequence
 
-from agents.checkpoint import load_policy
 from agents.config import config_from_dict
 from agents.evaluation import RECORD_COLUMNS, EpisodeVideo, evaluate, labelled_frame, parse_seed_range, read_records
+from agents.policy.checkpoint import load_policy
 from agents.trainer import Trainer
 from scripts import evaluate as evaluate_script
 

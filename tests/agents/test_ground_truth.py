@@ -14,10 +14,10 @@ import torch
 from torch.nn import functional as F
 
 import envs
-from agents.actor import Actor
-from agents.checkpoint import build_agent, ground_truth_size, load_policy
 from agents.config import config_from_dict, load_config
-from agents.models import ActorCritic
+from agents.policy.actor import Actor
+from agents.policy.checkpoint import build_agent, ground_truth_size, load_policy
+from agents.policy.models import ActorCritic
 from agents.sequences import pad_sequences, split_sequences
 from agents.sweep import load_panel, parameter_count
 from agents.trainer import Trainer

@@ -1,4 +1,4 @@
-"""The HELM branch (agents/helm.py): retrieval, frozenness, the step memory and its resets, loading of models."""
+"""The HELM branch (agents/policy/helm.py): retrieval, frozenness, the step memory and its resets, loading of models."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from torch import Tensor, nn
 
 pytest.importorskip("transformers")
 
-from agents.helm import HelmBranch, HelmMemory  # noqa: E402
+from agents.policy.helm import HelmBranch, HelmMemory  # noqa: E402
 
 SHAPE = (12, 10, 3)
 TINY = {"random_layers": 2, "random_width": 32, "random_heads": 4, "random_vocab": 256}
@@ -248,9 +248,9 @@ def test_random_lm_is_seeded_bit_for_bit() -> None:
 
 
 def test_transformers_is_imported_only_when_a_branch_is_built(monkeypatch: pytest.MonkeyPatch) -> None:
-    import agents.helm
+    import agents.policy.helm
 
-    tree = ast.parse(Path(agents.helm.__file__).read_text())
+    tree = ast.parse(Path(agents.policy.helm.__file__).read_text())
     top_level = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
     names = {a.name for n in top_level if isinstance(n, ast.Import) for a in n.names}
     names |= {n.module for n in top_level if isinstance(n, ast.ImportFrom)}

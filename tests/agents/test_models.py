@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from agents.config import ModelConfig
-from agents.models import (
+from agents.policy.models import (
     ActorCritic,
     NatureCNN,
     RecurrentMemory,

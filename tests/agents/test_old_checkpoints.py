@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from agents.checkpoint import checked_payload, latest_checkpoint, load_policy, read_checkpoint, write_checkpoint
 from agents.config import Schedule
+from agents.policy.checkpoint import checked_payload, latest_checkpoint, load_policy, read_checkpoint, write_checkpoint
 from scripts import evaluate as evaluate_script
 from scripts import train as train_script
 

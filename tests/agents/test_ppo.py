@@ -9,7 +9,7 @@ import torch
 
 from agents.buffer import RolloutBuffer
 from agents.config import ModelConfig, PPOConfig
-from agents.models import ActorCritic
+from agents.policy.models import ActorCritic
 from agents.ppo import explained_variance, gae_advantages, normalize, ppo_loss, ppo_update
 from agents.sequences import pad_sequences, split_sequences
 

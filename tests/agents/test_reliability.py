@@ -22,9 +22,9 @@ import torch
 import yaml
 
 from agents import evaluation
-from agents.checkpoint import DamagedCheckpoint, latest_checkpoint, read_checkpoint, write_checkpoint
 from agents.config import config_from_dict
 from agents.evaluation import evaluate_runs, read_records
+from agents.policy.checkpoint import DamagedCheckpoint, latest_checkpoint, read_checkpoint, write_checkpoint
 from agents.runtime import faults
 from agents.runtime.faults import FaultSpecError, parse_faults
 from agents.runtime.preemption import EXIT_PREEMPTED, Preempted, deferred_signals, raising_preempted

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from agents.checkpoint import check_checkpoint_config
 from agents.config import Config, config_from_dict, config_to_dict, resume_may_change
+from agents.policy.checkpoint import check_checkpoint_config
 from agents.sweep import PARTIAL, SweepError, panel_from_dict, prepare_run, run_status
 
 TINY = {

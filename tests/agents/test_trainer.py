@@ -15,9 +15,9 @@ import torch
 import yaml
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from agents.checkpoint import latest_checkpoint
 from agents.config import config_from_dict, load_config
-from agents.models import log_probs_and_entropy, one_hot_actions
+from agents.policy.checkpoint import latest_checkpoint
+from agents.policy.models import log_probs_and_entropy, one_hot_actions
 from agents.sequences import pad_sequences, split_sequences
 from agents.trainer import Trainer, TrainingDiverged
 from scripts import train as train_script
@@ -211,7 +211,7 @@ def test_an_extended_run_resumes_exactly_and_its_schedules_go_on_from_final(tmp_
     info = json.loads((tmp_path / "b" / "run_info.json").read_text())
     assert [e["update"] for e in info["extended"]] == [3] and info["finished"]["update"] == 6
     # the checkpoints from before the extension still load, for evaluation and for the trainer
-    from agents.checkpoint import load_policy
+    from agents.policy.checkpoint import load_policy
 
     assert load_policy(tmp_path / "b", tmp_path / "b" / "checkpoints" / "update_0000002.pt").update == 2
 

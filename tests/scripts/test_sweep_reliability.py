@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from agents.checkpoint import checkpoint_update, latest_checkpoint
+from agents.policy.checkpoint import checkpoint_update, latest_checkpoint
 from agents.runtime.preemption import EXIT_PREEMPTED
 from agents.sweep import FINISHED, load_panel, prepare_run, run_lock, run_status, train_run
 from scripts import sweep as sweep_script

@@ -3,7 +3,7 @@
 A run directory holds ``config.yaml`` (the resolved config), ``run_info.json`` and ``checkpoints/update_NNNNNNN.pt``.
 A checkpoint is written atomically with its size and SHA-256 (:data:`CHECKPOINT_MAGIC`), checked whenever it is read
 (a damaged one raises :class:`DamagedCheckpoint`, never loads), and holds the model, optimizer, every random
-generator, the counters and the actor's slot state (see :meth:`agents.actor.Actor.state`), so that a killed run
+generator, the counters and the actor's slot state (see :meth:`agents.policy.actor.Actor.state`), so that a killed run
 resumes exactly. The acting parts of a run (model, frozen HELM branch) are built from the config by
 :func:`build_agent`, the same way for training and for :func:`load_policy`.
 """
@@ -20,9 +20,9 @@ from typing import Any
 import torch
 import yaml
 
-from agents.actor import rollout_copy
 from agents.config import LENGTH_KEY, Config, config_from_dict, config_to_dict, differing_keys, resume_may_change
-from agents.models import ActorCritic, observation_fields
+from agents.policy.actor import rollout_copy
+from agents.policy.models import ActorCritic, observation_fields
 from agents.runtime.io import atomic_write_bytes, content_record
 
 CHECKPOINT_FORMAT = 2  # of the saved state (the dict); the file around it is described by CHECKPOINT_MAGIC
@@ -58,7 +58,7 @@ def build_agent(config: Config, core: Any, device: torch.device | str = "cpu") -
     named = f"{config.env.id}'s observation space {environment_space(core)}"
     helm = None
     if config.model.helm.enabled:
-        from agents.helm import HelmBranch
+        from agents.policy.helm import HelmBranch
 
         h = config.model.helm
         image = observation_fields(observation_space).get("image")

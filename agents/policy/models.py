@@ -10,9 +10,9 @@ The encoder and the memory module come from one registry each (:data:`IMAGE_ENCO
 the config's choices, :data:`agents.config.ENCODERS`, and :data:`agents.memory.MEMORY_MODULES` with the memory
 interface, which the config validation reads too). With frame
 stacking the image (and vector) input holds the last k observations along the channels; with the HELM branch, its
-cached output (:mod:`agents.helm`) joins the CNN features. Non-memory layers always see a flat batch of real steps;
-only the memory module sees the (sequences, length) layout, which it takes from the padding mask of the minibatch.
-This module does not know which memory it holds: the model passes the memory's state, records and each step's
+cached output (:mod:`agents.policy.helm`) joins the CNN features. Non-memory layers always see a flat batch of real
+steps; only the memory module sees the (sequences, length) layout, which it takes from the padding mask of the
+minibatch. This module does not know which memory it holds: the model passes the memory's state, records and each step's
 ``episode_step`` through. Two optional heads read the memory output and are trained only through their own losses
 (:meth:`ActorCritic.evaluate`): the observation decoder (``ppo.reconstruction_coef``) and the ground-truth estimator
 (``ppo.ground_truth_coef``); acting never runs them.
@@ -275,7 +275,8 @@ class ActorCritic(nn.Module):
                 nn.ReLU(),
                 orthogonal(nn.Linear(hidden, ground_truth_size), 1.0),
             )
-        self.weights_generation = 0  # changes of the weights (agents.actor.refresh_copy): older acting caches are stale
+        # changes of the weights (agents.policy.actor.refresh_copy): older acting caches are stale
+        self.weights_generation = 0
 
     @property
     def state_shape(self) -> tuple[int, ...]:

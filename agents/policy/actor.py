@@ -26,7 +26,7 @@ import torch
 from torch import Tensor
 
 from agents.config import Config
-from agents.models import OBSERVATION_KEYS, ActorCritic, choose_actions, join_frames, observation_fields
+from agents.policy.models import OBSERVATION_KEYS, ActorCritic, choose_actions, join_frames, observation_fields
 from envs.core import BatchedCore
 
 SeedSource = Callable[[int], list[int]]  # how many seeds -> that many episode seeds
@@ -92,7 +92,7 @@ class SlotMemory:
     previous_reward: Tensor  # (B,) float32
     episode_step: Tensor  # (B,) int64
     stacks: dict[str, Tensor]  # observation name -> (B, k, ...) the last k observations, oldest first
-    helm: Any = None  # the HELM branch's memory (agents.helm), when there is a branch
+    helm: Any = None  # the HELM branch's memory (agents.policy.helm), when there is a branch
     seeds: list[int] = field(default_factory=list)
     actions: list[list[np.ndarray]] = field(default_factory=list)  # decisions of each slot's current episode
 
