@@ -22,21 +22,14 @@ from typing import Any
 import numpy as np
 import torch
 
+from agents.analysis.digest import config_digest, describe_differences, env_options_text, experiment_settings
+from agents.analysis.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
+from agents.analysis.results import EPISODE_COLUMNS, TRAINING_COLUMNS, read_episodes
+from agents.analysis.scores import summarize as summarize_episodes
 from agents.config import Config, check_disjoint_seeds, is_device_name
-from agents.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
 from agents.policy.actor import Actor, Outcome
 from agents.policy.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
 from agents.policy.models import ActorCritic
-from agents.results import (
-    EPISODE_COLUMNS,
-    TRAINING_COLUMNS,
-    config_digest,
-    describe_differences,
-    env_options_text,
-    experiment_settings,
-    read_episodes,
-)
-from agents.results import summarize as summarize_episodes
 from agents.runtime.faults import active_faults
 from agents.runtime.io import (
     atomic_write_bytes,
@@ -97,7 +90,10 @@ def evaluate(
         bar.close()
     metric = metric_of(config.env.id, config.env.metric)
     spec = {} if METRICS.get(config.env.id) is metric else {SPEC_COLUMN: metric_spec(metric)}  # plots read it
-    options, digest = env_options_text(config), config_digest(config, greedy)  # the columns agents.results checks
+    options, digest = (
+        env_options_text(config),
+        config_digest(config, greedy),
+    )  # the columns agents.analysis.results checks
     records = []
     for slot in range(slots):
         info = finals[slot]
@@ -429,8 +425,8 @@ def evaluate_runs(
       ValueError before anything is evaluated).
     * ``training.csv``: the runs' ``training.csv`` rows, merged by (method, task, run, step), for the training-seed
       curves of ``scripts/plot.py``.
-    * ``summary.json``: :func:`agents.results.summarize` over all the merged records, which directory each run name
-      stands for (``run_directories``, see :func:`unique_run_names`), this evaluation and the earlier ones.
+    * ``summary.json``: :func:`agents.analysis.scores.summarize` over all the merged records, which directory each run
+      name stands for (``run_directories``, see :func:`unique_run_names`), this evaluation and the earlier ones.
 
     Every file is written atomically, after the merged records were checked. ``echo`` receives what is evaluated
     (the inclusive seed range, checkpoints) and what the merge kept and replaced."""

@@ -718,14 +718,15 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
       then the final evaluation of its last checkpoint, which takes the place of the in-training records of that
       step (same seeds, repetitions and sampling seed); the ``run`` column holds the run's name;
     * ``training.csv``: the runs' ``training.csv`` one after the other, ``run`` as above;
-    * ``summary.json``: :func:`agents.results.summarize` of those records (per run and step the means; per method
-      and task, at every step the runs share, the IQM across runs with its 95% stratified-bootstrap interval), the
-      runs not finished yet, the protocol and provenance;
-    * ``plots/``: the curves and final-performance figures of :func:`agents.plots.plot_results`.
+    * ``summary.json``: :func:`agents.analysis.scores.summarize` of those records (per run and step the means; per
+      method and task, at every step the runs share, the IQM across runs with its 95% stratified-bootstrap interval),
+      the runs not finished yet, the protocol and provenance;
+    * ``plots/``: the curves and final-performance figures of :func:`agents.analysis.plots.plot_results`.
 
     Runs not finished are left out (and listed). Returns the results directory."""
+    from agents.analysis.results import TRAINING_COLUMNS, read_episodes
+    from agents.analysis.scores import summarize
     from agents.evaluation import read_records, write_records
-    from agents.results import TRAINING_COLUMNS, read_episodes, summarize
 
     found = statuses(panel.runs)
     finished = [s.run for s in found if s.state == FINISHED]
@@ -772,10 +773,10 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
 
 
 def _plot(results_dir: Path, echo: Echo) -> None:
-    """The panel's curves and final-performance charts (``agents.plots``) into ``results/plots``. A failure is
+    """The panel's curves and final-performance charts (``agents.analysis.plots``) into ``results/plots``. A failure is
     reported, not raised: the records are written, and ``scripts/plot.py`` can draw them again."""
     try:
-        from agents import plots
+        from agents.analysis import plots
     except ImportError as err:
         echo(f"plots: skipped ({err}); the records are in {results_dir}")
         return

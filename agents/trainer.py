@@ -45,6 +45,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from agents.analysis.digest import config_digest
+from agents.analysis.metrics import metric_of
+from agents.analysis.results import TRAINING_COLUMNS
 from agents.buffer import RolloutBuffer
 from agents.config import (
     LENGTH_KEY,
@@ -66,7 +69,6 @@ from agents.evaluation import (
     seed_list,
     write_records,
 )
-from agents.metrics import metric_of
 from agents.policy.actor import Actor, refresh_copy, rollout_copy
 from agents.policy.checkpoint import (
     DamagedCheckpoint,
@@ -82,7 +84,6 @@ from agents.policy.checkpoint import (
     write_checkpoint,
 )
 from agents.ppo import explained_variance, gae_advantages, ppo_update
-from agents.results import TRAINING_COLUMNS, config_digest
 from agents.runtime import faults
 from agents.runtime.io import atomic_write_text, content_record, now, provenance, write_json_atomic
 from agents.runtime.preemption import Preempted, StopRequests, signal_name

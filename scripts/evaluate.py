@@ -33,9 +33,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
+from agents.analysis.scores import format_table  # noqa: E402
 from agents.config import ConfigError  # noqa: E402
 from agents.evaluation import check_device, evaluate_runs, parse_seed_range  # noqa: E402
-from agents.results import format_table  # noqa: E402
 from agents.runtime.preemption import EXIT_PREEMPTED, Preempted, raising_preempted  # noqa: E402
 
 SEED_LIMIT = 2**63 - 1  # torch's generator takes seeds up to here

@@ -17,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
-from agents import plots, results  # noqa: E402
+from agents.analysis import plots, results, scores  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
                 seed=args.seed,
                 zoom=args.zoom,
             )
-            final = results.aggregate(
+            final = scores.aggregate(
                 results.read_episodes(*args.results), args.column, steps="last", reps=args.reps, seed=args.seed
             )
         except (FileNotFoundError, NotADirectoryError, KeyError, ValueError) as err:
@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     for warning in {str(w.message): w for w in caught if issubclass(w.category, results.ResultsWarning)}:
         print(f"warning: {warning}", file=sys.stderr)
-    print(results.format_table(final, ("method", "task", "step", "iqm", "low", "high", "runs", "episodes")))
+    print(scores.format_table(final, ("method", "task", "step", "iqm", "low", "high", "runs", "episodes")))
     for path in written:
         print(f"wrote {path}")
     return 0

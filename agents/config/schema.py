@@ -58,8 +58,8 @@ class Schedule(Settings):
 
 @dataclass
 class MetricConfig(Settings):
-    """The task's metric when the metric table (agents/metrics.py) has none for the env id, or to replace it: an
-    entry of the final info (e.g. a success flag), with its plot label and range. Empty key: the table's metric, or
+    """The task's metric when the metric table (agents/analysis/metrics.py) has none for the env id, or to replace it:
+    an entry of the final info (e.g. a success flag), with its plot label and range. Empty key: the table's metric, or
     the episode return for an id it does not know."""
 
     key: str = param("", "final-info entry that is the task's metric (empty: the table's, else the return)")

@@ -12,12 +12,12 @@ import pytest
 import torch
 
 import envs
+from agents.analysis.metrics import metric_of
+from agents.analysis.plots import curves_figure, final_figure
+from agents.analysis.results import read_episodes
 from agents.config import ConfigError, config_from_dict, task_name
 from agents.evaluation import evaluate, seed_list, write_records
 from agents.memory import MEMORY_MODULES
-from agents.metrics import metric_of
-from agents.plots import curves_figure, final_figure
-from agents.results import read_episodes
 from agents.trainer import Trainer
 from envs.gymnasium_core import GymnasiumCore, SeedingError, UnsupportedSpaceError
 from tests.support.interrupt import kill_after

@@ -1,5 +1,5 @@
-"""agents.plots on synthetic results: colours fixed per method, labels from the metric table, what is drawn: axis
-ranges, chance lines, legend entries, method labels and task titles, read off the matplotlib objects."""
+"""agents.analysis.plots on synthetic results: colours fixed per method, labels from the metric table, what is drawn:
+axis ranges, chance lines, legend entries, method labels and task titles, read off the matplotlib objects."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from matplotlib.colors import to_hex
 
-from agents import plots, results
+from agents.analysis import plots, results, scores
+from agents.analysis.metrics import METRICS
 from agents.config import expand_grid, read_config_file
-from agents.metrics import METRICS
 from tests.support.synthetic_results import episode_rows, write_csv, write_results
 
 
@@ -80,7 +80,7 @@ def test_curves_figure_panels_and_colours(loaded: results.Results) -> None:
     novel = figure.axes[3]
     gru = next(line for line in novel.lines if to_hex(line.get_color()) == plots.METHOD_COLORS["gru"])
     np.testing.assert_allclose(gru.get_xdata(), [0.008192, 0.016384, 0.024576])
-    expected = [row["iqm"] for row in results.aggregate(loaded.episodes.where(task="ProofOfMemory-v0", method="gru"))]
+    expected = [row["iqm"] for row in scores.aggregate(loaded.episodes.where(task="ProofOfMemory-v0", method="gru"))]
     np.testing.assert_allclose(gru.get_ydata(), expected)
     assert len(novel.collections) == 3, "one CI band per method"
     assert legend_texts(figure) == ["PPO", "GRU-PPO", "custom", "chance"]  # ProofOfMemory's 0.5 is drawn
@@ -96,7 +96,7 @@ def test_curves_without_training_and_with_a_subset_keep_colours(loaded: results.
 def test_final_figure_bars(loaded: results.Results) -> None:
     figure = plots.final_figure(loaded.episodes, reps=200)
     assert [axes.get_xlabel() for axes in figure.axes] == ["Commands Executed", "Success Rate"]
-    rows = results.aggregate(loaded.episodes, steps="last", reps=200, overall=False)
+    rows = scores.aggregate(loaded.episodes, steps="last", reps=200, overall=False)
     for axes, task in zip(figure.axes, ("MortarMayhem-Grid-v0", "ProofOfMemory-v0"), strict=True):
         assert [label.get_text() for label in axes.get_yticklabels()] == ["PPO", "GRU-PPO", "custom"]
         bars = axes.patches

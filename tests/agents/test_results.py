@@ -1,4 +1,5 @@
-"""agents.results on synthetic records: reading, run-level scores, matrices, curves, aggregates and summaries."""
+"""agents.analysis.results and agents.analysis.scores on synthetic records: reading, run-level scores, matrices, curves,
+aggregates and summaries."""
 
 from __future__ import annotations
 
@@ -13,9 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agents import results, stats
+from agents.analysis import results, stats
+from agents.analysis import scores as scoring
+from agents.analysis.digest import config_digest
+from agents.analysis.results import EPISODE_COLUMNS, Records, ResultsWarning
 from agents.config import MAX_TASK_NAME, NOT_IN_DIGEST, check_name, dump_config, load_config, task_name
-from agents.results import EPISODE_COLUMNS, Records, ResultsWarning
 from agents.sweep import load_panel
 from agents.trainer import Trainer
 from tests.support.synthetic_results import episode_rows, training_rows, write_csv, write_results
@@ -111,12 +114,12 @@ def test_runs_are_named_within_their_method_and_task(tmp_path: Path) -> None:
     for row in rows:
         row["run"] = row["run"].split("-")[-1]  # drop the method from the name
     write_csv(tmp_path / "r" / "episodes.csv", rows, EPISODE_COLUMNS)
-    scores = results.run_scores(results.read_episodes(tmp_path / "r"))
+    scores = scoring.run_scores(results.read_episodes(tmp_path / "r"))
     tasks = {row["task"] for row in rows}
     assert len(scores) == 2 * len(tasks) * 2 and sorted(set(scores["run"].tolist())) == sorted(
         {row["run"] for row in rows}
     )
-    assert {m: len(s.matrix()) for m, s in results.score_matrices(results.read_episodes(tmp_path / "r")).items()} == {
+    assert {m: len(s.matrix()) for m, s in scoring.score_matrices(results.read_episodes(tmp_path / "r")).items()} == {
         "gru": 2,
         "ppo": 2,
     }
@@ -141,7 +144,7 @@ def test_training_and_episodes_must_agree_on_a_run(tmp_path: Path) -> None:
 
 def test_run_scores_are_episode_means(results_dir: Path) -> None:
     rows = episode_rows()
-    scores = results.run_scores(results.read_episodes(results_dir))
+    scores = scoring.run_scores(results.read_episodes(results_dir))
     expected = brute_scores(rows)
     assert len(scores) == len(expected)
     for i in range(len(scores)):
@@ -155,23 +158,23 @@ def test_empty_and_partly_empty_columns(tmp_path: Path) -> None:
     directory = write_results(tmp_path / "r", tasks=tasks, training=False)
     episodes = results.read_episodes(directory)
     with pytest.warns(ResultsWarning, match="'success' is empty for 18 run/step pair\\(s\\)"):
-        scores = results.run_scores(episodes, "success")
+        scores = scoring.run_scores(episodes, "success")
     assert set(scores["task"].tolist()) == {"ProofOfMemory-v0"}
     rows = episode_rows(methods=("gru",), runs=1, steps=(10,), seeds=2, repetitions=1)
     rows[0]["metric"] = ""
     write_csv(tmp_path / "p" / "episodes.csv", rows, EPISODE_COLUMNS)
     with pytest.raises(ValueError, match="'metric' is empty in 1 of the 2 episodes of run"):
-        results.run_scores(results.read_episodes(tmp_path / "p"))
+        scoring.run_scores(results.read_episodes(tmp_path / "p"))
     with pytest.raises(ValueError, match="column 'method' is not numeric"):
-        results.run_scores(episodes, "method")
+        scoring.run_scores(episodes, "method")
     with pytest.raises(KeyError, match="no column 'coins'"):
-        results.run_scores(episodes, "coins")
+        scoring.run_scores(episodes, "coins")
 
 
 def test_score_matrices_and_curves(results_dir: Path) -> None:
     episodes = results.read_episodes(results_dir)
     expected = brute_scores(episode_rows())
-    matrices = results.score_matrices(episodes)
+    matrices = scoring.score_matrices(episodes)
     assert set(matrices) == {"gru", "ppo"}
     gru = matrices["gru"]
     assert gru.tasks == ("MortarMayhem-Grid-v0", "ProofOfMemory-v0") and gru.matrix().shape == (3, 2)
@@ -179,10 +182,10 @@ def test_score_matrices_and_curves(results_dir: Path) -> None:
         for i in range(3):
             assert gru.runs[j][i] == f"gru-{task}-{i}"
             assert gru.matrix()[i, j] == pytest.approx(expected[(f"gru-{task}-{i}", 24576)])
-    assert results.score_matrices(episodes, step=8192)["gru"].matrix()[0, 1] == pytest.approx(
+    assert scoring.score_matrices(episodes, step=8192)["gru"].matrix()[0, 1] == pytest.approx(
         expected[("gru-ProofOfMemory-v0-0", 8192)]
     )
-    curves = results.score_curves(episodes)
+    curves = scoring.score_curves(episodes)
     assert curves["ppo"].array().shape == (3, 2, 3)
     assert curves["ppo"].checkpoints.tolist() == [8192, 16384, 24576]
     assert curves["ppo"].array()[2, 0, 1] == pytest.approx(expected[("ppo-MortarMayhem-Grid-v0-2", 16384)])
@@ -192,12 +195,12 @@ def test_score_matrices_and_curves(results_dir: Path) -> None:
 
 def test_aggregate_equals_stats_on_the_matrices(results_dir: Path) -> None:
     episodes = results.read_episodes(results_dir)
-    rows = results.aggregate(episodes, reps=500, seed=3)
+    rows = scoring.aggregate(episodes, reps=500, seed=3)
     assert {(row["method"], row["task"]) for row in rows} == {
         (method, task) for method in ("gru", "ppo") for task in ("MortarMayhem-Grid-v0", "ProofOfMemory-v0", "all")
     }
     assert len(rows) == 2 * 3 * 3
-    curves = results.score_curves(episodes)
+    curves = scoring.score_curves(episodes)
     for row in rows:
         k = [8192, 16384, 24576].index(row["step"])
         array = curves[row["method"]].array()[:, :, k]
@@ -205,9 +208,9 @@ def test_aggregate_equals_stats_on_the_matrices(results_dir: Path) -> None:
         point, low, high = stats.interval_estimates({"m": matrix}, reps=500, seed=3)["m"]
         assert (row["iqm"], row["low"], row["high"]) == pytest.approx((point, low, high), abs=1e-12)
         assert row["runs"] == matrix.size and row["episodes"] == matrix.size * 8
-    last = results.aggregate(episodes, steps="last", reps=200)
+    last = scoring.aggregate(episodes, steps="last", reps=200)
     assert {row["step"] for row in last} == {24576} and len(last) == 6
-    only = results.aggregate(episodes, steps=16384, reps=200, overall=False)
+    only = scoring.aggregate(episodes, steps=16384, reps=200, overall=False)
     assert {row["step"] for row in only} == {16384} and {row["task"] for row in only} != {"all"}
 
 
@@ -220,16 +223,16 @@ def test_different_checkpoints_use_shared_steps_with_a_warning(tmp_path: Path) -
     with pytest.warns(
         ResultsWarning, match="different steps .* using the 2 step\\(s\\) all runs share and leaving out 2"
     ):
-        aggregated = results.aggregate(episodes, reps=100)
+        aggregated = scoring.aggregate(episodes, reps=100)
     assert [row["step"] for row in aggregated] == [8192, 24576]
     assert all(row["runs"] == 3 for row in aggregated)
     with pytest.warns(ResultsWarning, match="runs end at different steps \\(24576, 32768\\)"):
-        last = results.aggregate(episodes, steps="last", reps=100)
+        last = scoring.aggregate(episodes, steps="last", reps=100)
     assert last[0]["step"] == 32768 and last[0]["runs"] == 3
     with pytest.warns(ResultsWarning, match="have no episodes at some of the step"):
-        results.aggregate(episodes, steps=[16384], reps=100)
+        scoring.aggregate(episodes, steps=[16384], reps=100)
     with pytest.raises(ValueError, match="no episodes at step\\(s\\) 5"):
-        results.aggregate(episodes, steps=5)
+        scoring.aggregate(episodes, steps=5)
 
 
 def test_ragged_tasks_aggregate_but_refuse_a_matrix(tmp_path: Path) -> None:
@@ -238,15 +241,15 @@ def test_ragged_tasks_aggregate_but_refuse_a_matrix(tmp_path: Path) -> None:
     write_csv(tmp_path / "r" / "episodes.csv", rows, EPISODE_COLUMNS)
     episodes = results.read_episodes(tmp_path / "r")
     with pytest.raises(ValueError, match="different numbers of runs per task \\(MortarMayhem-Grid-v0: 3, Proof"):
-        results.score_matrices(episodes)["gru"].matrix()
-    overall = [row for row in results.aggregate(episodes, reps=100) if row["task"] == "all"]
+        scoring.score_matrices(episodes)["gru"].matrix()
+    overall = [row for row in scoring.aggregate(episodes, reps=100) if row["task"] == "all"]
     assert [row["runs"] for row in overall] == [5, 5, 5]
 
 
 def test_run_summary_and_summarize(results_dir: Path) -> None:
     rows = episode_rows()
     episodes = results.read_episodes(results_dir)
-    summary = results.run_summary(episodes)
+    summary = scoring.run_summary(episodes)
     assert len(summary) == 2 * 2 * 3 * 3
     returns = defaultdict(list)
     for row in rows:
@@ -260,7 +263,7 @@ def test_run_summary_and_summarize(results_dir: Path) -> None:
         assert row["iqm"] == pytest.approx(stats.iqm(returns[key]))
         assert row["metric"] == pytest.approx(metric[key])
         assert row["metric_reference"] == pytest.approx(reference[key])
-    document = results.summarize(episodes, reps=100)
+    document = scoring.summarize(episodes, reps=100)
     assert json.loads(json.dumps(document)) == document
     assert document["runs"] == summary and len(document["aggregate"]) == 18
     assert document["aggregate_of"]["confidence"] == 0.95
@@ -268,32 +271,32 @@ def test_run_summary_and_summarize(results_dir: Path) -> None:
 
 def test_training_curves(tmp_path: Path) -> None:
     loaded = results.read_results(write_results(tmp_path / "r"))
-    curves = results.training_curves(loaded.training, points=10, smoothing=0.1)
+    curves = scoring.training_curves(loaded.training, points=10, smoothing=0.1)
     assert set(curves) == {(m, t) for m in ("gru", "ppo") for t in ("MortarMayhem-Grid-v0", "ProofOfMemory-v0")}
     gru = curves[("gru", "ProofOfMemory-v0")]
     assert gru.columns[0].shape == (3, 10) and gru.episodes is None
     assert gru.checkpoints[0] == 1024 and gru.checkpoints[-1] == 29 * 1024  # the last finite update is the 29th
-    point = results.estimate(gru, "ProofOfMemory-v0", reps=100)
+    point = scoring.estimate(gru, "ProofOfMemory-v0", reps=100)
     assert [row["step"] for row in point] == gru.checkpoints.tolist() and point[0]["episodes"] is None
     assert point[-1]["iqm"] > point[0]["iqm"] + 0.5, "the synthetic return rises"
     rows = training_rows(methods=("gru",), tasks={"ProofOfMemory-v0": "ProofOfMemory-v0"})
     rows = [row for row in rows if not (row["run"].endswith("-1") and row["step"] > 20 * 1024)]
     write_csv(tmp_path / "t" / "training.csv", rows, results.TRAINING_COLUMNS)
     with pytest.warns(ResultsWarning, match="logs end at different steps"):
-        cut = results.training_curves(results.read_training(tmp_path / "t"), points=10)
+        cut = scoring.training_curves(results.read_training(tmp_path / "t"), points=10)
     assert cut[("gru", "ProofOfMemory-v0")].checkpoints[-1] == 19 * 1024
 
 
 def test_moving_average_keeps_means_at_the_edges() -> None:
     values = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
-    np.testing.assert_allclose(results._moving_average(values, 3), [1.5, 2.0, 3.0, 4.0, 4.5])
-    np.testing.assert_array_equal(results._moving_average(values, 1), values)
+    np.testing.assert_allclose(scoring._moving_average(values, 3), [1.5, 2.0, 3.0, 4.0, 4.5])
+    np.testing.assert_array_equal(scoring._moving_average(values, 1), values)
 
 
 def test_format_table() -> None:
-    text = results.format_table([{"method": "gru", "iqm": 0.5, "episodes": None}, {"method": "ppo", "iqm": 0.25}])
+    text = scoring.format_table([{"method": "gru", "iqm": 0.5, "episodes": None}, {"method": "ppo", "iqm": 0.25}])
     assert text.splitlines() == ["method     iqm  episodes", "   gru  0.5000         -", "   ppo  0.2500         -"]
-    assert results.format_table([]) == "(no rows)"
+    assert scoring.format_table([]) == "(no rows)"
 
 
 # ------------------------------------------------------------------ C7: one (method, task) cell is one experiment
@@ -322,7 +325,7 @@ def test_default_task_names_tell_option_sets_apart() -> None:
 
 def test_config_digest_ignores_seeds_and_bookkeeping_only() -> None:
     base = load_config(QUICKSTART)
-    digest = results.config_digest(base)
+    digest = config_digest(base)
     assert re.fullmatch(r"c[0-9a-f]{12}", digest)
     same = [
         "run.seed=5",
@@ -341,7 +344,7 @@ def test_config_digest_ignores_seeds_and_bookkeeping_only() -> None:
         "env.options={delay: 16, reward_correct: 1}",  # the same options written out
     ]
     for override in same:
-        assert results.config_digest(load_config(QUICKSTART, [override])) == digest, override
+        assert config_digest(load_config(QUICKSTART, [override])) == digest, override
     different = [
         "ppo.gamma=0.9",
         "env.options={delay: 8}",
@@ -353,21 +356,21 @@ def test_config_digest_ignores_seeds_and_bookkeeping_only() -> None:
         "env.frame_skip=2",
         "eval.greedy=true",
     ]
-    digests = {override: results.config_digest(load_config(QUICKSTART, [override])) for override in different}
+    digests = {override: config_digest(load_config(QUICKSTART, [override])) for override in different}
     assert digest not in digests.values() and len(set(digests.values())) == len(different), digests
-    assert results.config_digest(base, greedy=True) == digests["eval.greedy=true"], "as the evaluation played"
+    assert config_digest(base, greedy=True) == digests["eval.greedy=true"], "as the evaluation played"
     assert set(NOT_IN_DIGEST) >= {"run.seed", "run.device", "run.torch_threads", "run.checkpoint_interval"}
 
 
 def test_task_names_and_digests_are_the_same_in_another_process() -> None:
     code = (
-        "from agents.config import load_config; from agents.results import config_digest;"
+        "from agents.config import load_config; from agents.analysis.digest import config_digest;"
         f"c = load_config({str(QUICKSTART)!r}); print(c.task, config_digest(c))"
     )
     env = {**os.environ, "PYTHONHASHSEED": "12345"}
     shown = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True)
     config = load_config(QUICKSTART)
-    assert shown.stdout.split() == [config.task, results.config_digest(config)]
+    assert shown.stdout.split() == [config.task, config_digest(config)]
 
 
 def test_the_seeds_of_a_sweep_cell_share_a_digest() -> None:
@@ -376,14 +379,14 @@ def test_the_seeds_of_a_sweep_cell_share_a_digest() -> None:
     panel = load_panel(ROOT / "configs" / "cpu" / "mm_grid_1.yaml", root=ROOT / "results" / "cpu")
     cells = defaultdict(set)
     for run in panel.runs:
-        cells[(run.config.method, run.config.task)].add(results.config_digest(run.config))
+        cells[(run.config.method, run.config.task)].add(config_digest(run.config))
     assert len(cells) == 10 and all(len(digests) == 1 for digests in cells.values()), cells
     assert len({digest for digests in cells.values() for digest in digests}) == 10
     for run in panel.runs:
         saved = run.run_dir / "config.yaml"
         if saved.is_file():
             config = load_config(saved)
-            assert {results.config_digest(config)} == cells[(run.config.method, run.config.task)], run.name
+            assert {config_digest(config)} == cells[(run.config.method, run.config.task)], run.name
 
 
 def digest_rows(runs: dict[str, str], method: str = "gru", steps: tuple[int, ...] = (10,)) -> list[dict]:
@@ -414,7 +417,7 @@ def test_runs_with_different_configs_in_one_cell_are_refused(tmp_path: Path) -> 
     assert "caaaaaaaaaaaa: run(s) seed0, seed1" in message and "cbbbbbbbbbbbb: run(s) other" in message
     assert "config.yaml files were not found" in message
     with pytest.raises(ValueError, match="differ in more than the seed"):  # records built in memory, too
-        results.aggregate(Records({name: np.array([row[name] for row in rows]) for name in rows[0]}))
+        scoring.aggregate(Records({name: np.array([row[name] for row in rows]) for name in rows[0]}))
     # with the runs' saved configs beside the results, the differing keys are named
     for run, overrides in (
         ("seed0", []),
@@ -441,7 +444,7 @@ def test_configs_are_compared_within_a_cell_and_by_each_runs_latest_rows(tmp_pat
     changes its digest midway, and its latest rows count."""
     rows = digest_rows({"seed0": "caaaaaaaaaaaa", "seed1": ""}) + digest_rows({"seed0": "cbbbbbbbbbbbb"}, "ppo")
     write_csv(tmp_path / "a" / "episodes.csv", rows, EPISODE_COLUMNS)
-    assert len(results.aggregate(results.read_episodes(tmp_path / "a"), reps=50)) == 2
+    assert len(scoring.aggregate(results.read_episodes(tmp_path / "a"), reps=50)) == 2
     extended = digest_rows({"seed0": "caaaaaaaaaaaa|cbbbbbbbbbbbb", "seed1": "cbbbbbbbbbbbb"}, steps=(10, 20))
     write_csv(tmp_path / "b" / "episodes.csv", extended, EPISODE_COLUMNS)
     assert len(results.read_episodes(tmp_path / "b")) == len(extended)
@@ -470,7 +473,7 @@ def test_committed_records_without_the_new_columns_still_load(directory: str) ->
     assert {o for o, old in zip(loaded.episodes[results.OPTIONS_COLUMN].tolist(), first_runs, strict=True) if old} == {
         ""
     }
-    assert len(results.aggregate(loaded.episodes, steps="last", reps=50))
+    assert len(scoring.aggregate(loaded.episodes, steps="last", reps=50))
 
 
 def test_the_committed_example_records_carry_one_experiment_per_cell() -> None:
@@ -521,7 +524,7 @@ def test_training_and_evaluation_write_the_task_options_and_digest(tmp_path: Pat
     loaded = results.Results(
         results.read_episodes(tmp_path / "run" / "eval"), results.read_training(tmp_path / "run"), ()
     )
-    digest = results.config_digest(config)
+    digest = config_digest(config)
     assert loaded.episodes.names[: len(EPISODE_COLUMNS)] == list(EPISODE_COLUMNS)
     assert set(loaded.episodes["task"].tolist()) == set(loaded.training["task"].tolist()) == {config.task}
     assert set(loaded.episodes["env_options"].tolist()) == {'{"delay":16}'}

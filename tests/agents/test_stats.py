@@ -1,4 +1,4 @@
-"""agents.stats against the rliable package (a dev dependency, imported only here).
+"""agents.analysis.stats against the rliable package (a dev dependency, imported only here).
 
 The IQM must agree to 1e-9. Bootstrap intervals come from random draws, so ours and rliable's differ by Monte-Carlo
 noise; the tolerance is stated in probability units, which makes it free of the scores' scale: the p-quantile of
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.stats import ks_2samp, trim_mean
 
-from agents import stats
+from agents.analysis import stats
 
 rliable_library = pytest.importorskip("rliable.library")
 rliable_metrics = pytest.importorskip("rliable.metrics")

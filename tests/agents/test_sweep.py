@@ -233,7 +233,7 @@ def test_run_names_and_panels() -> None:
 def test_plain_axes_never_pool_different_experiments_in_one_cell() -> None:
     """The records' (method, task) cell of a sweep run holds the runs of its seeds only: an env.* axis extends the
     task's name, any other plain axis the method's, so the panel's results never refuse (or pool) them."""
-    from agents.results import config_digest
+    from agents.analysis.digest import config_digest
     from agents.sweep import run_coordinates
 
     grid = {"method": {"gru": {}}, "task": {"pom": {}}, "run.seed": [0, 1], "ppo.gamma": [0.9, 0.99]}

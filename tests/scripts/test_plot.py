@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from matplotlib.image import imread
 
-from agents.results import EPISODE_COLUMNS
+from agents.analysis.results import EPISODE_COLUMNS
 from scripts import plot
 from tests.support.synthetic_results import episode_rows, write_csv, write_results
 

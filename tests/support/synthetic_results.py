@@ -1,5 +1,5 @@
 """Synthetic results directories (``episodes.csv`` and ``training.csv``) in the evaluation's format, for the tests of
-agents.results, agents.plots, scripts/plot.py and the notebook."""
+agents.analysis.results, agents.analysis.plots, scripts/plot.py and the notebook."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.results import EPISODE_COLUMNS, TRAINING_COLUMNS
+from agents.analysis.results import EPISODE_COLUMNS, TRAINING_COLUMNS
 
 TASKS = {  # task -> env id (two tasks may share an id with different options)
     "ProofOfMemory-v0": "ProofOfMemory-v0",

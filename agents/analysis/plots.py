@@ -1,5 +1,5 @@
 """Figures of evaluation results: sample-efficiency curves and final performance, IQM with 95% stratified-bootstrap
-intervals across runs (:mod:`agents.results`, :mod:`agents.stats`).
+intervals across runs (:mod:`agents.analysis.scores`, :mod:`agents.analysis.stats`).
 
 Figures are built on ``matplotlib.figure.Figure`` with an Agg canvas (no pyplot, no global backend switch; matplotlib
 is imported inside the functions), returned for display and written as PNG and PDF through
@@ -7,8 +7,8 @@ is imported inside the functions), returned for display and written as PNG and P
 colours, any other method takes the next spare colour in the sorted order of the unknown names.
 
 Methods are labelled as in the paper (:data:`METHOD_LABELS`: PPO, GRU-PPO, 4-Stack, ...), tasks by their environment
-id and non-default options (:func:`task_title`). A metric with a known range (:mod:`agents.metrics`: success and
-commands executed in [0, 1], counts from 0) is shown on that whole range unless ``zoom`` is set, and a dashed line
+id and non-default options (:func:`task_title`). A metric with a known range (:mod:`agents.analysis.metrics`: success
+and commands executed in [0, 1], counts from 0) is shown on that whole range unless ``zoom`` is set, and a dashed line
 marks the task's chance level where the metric table knows it for the task's options.
 """
 
@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from agents import results
-from agents.metrics import METRICS, SPEC_COLUMN, metric_of, read_metric_spec
+from agents.analysis import results, scores
+from agents.analysis.metrics import METRICS, SPEC_COLUMN, metric_of, read_metric_spec
 from agents.runtime.io import atomic_write_bytes
 
 if TYPE_CHECKING:
@@ -179,8 +179,8 @@ def _complete(colors: dict[str, str] | None, methods: Iterable[str]) -> dict[str
 
 
 def metric_label(env_id: str, column: str = "metric", spec: Mapping[str, Any] | None = None) -> str:
-    """The axis label of a task's metric (from :data:`agents.metrics.METRICS`, or ``spec`` as in :func:`metric_range`);
-    the column name for other columns."""
+    """The axis label of a task's metric (from :data:`agents.analysis.metrics.METRICS`, or ``spec`` as in
+    :func:`metric_range`); the column name for other columns."""
     if column == "metric" and spec:
         return spec["label"]
     if column == "metric" and env_id in METRICS:
@@ -293,11 +293,11 @@ def curves_figure(
     options: Mapping[str, Mapping[str, Any] | None] | None = None,
 ) -> Figure:
     """Sample-efficiency curves, one row of panels per task: the training-seed ``training_column`` (left, when
-    ``training`` is given; lightly smoothed, :func:`agents.results.training_curves`) beside the novel-seed ``column``
-    (IQM and interval across runs at every checkpoint the runs share).
+    ``training`` is given; lightly smoothed, :func:`agents.analysis.scores.training_curves`) beside the novel-seed
+    ``column`` (IQM and interval across runs at every checkpoint the runs share).
 
     A metric's axis spans its whole range unless ``zoom``; a dashed line marks the chance level where known.
-    ``options``: task -> non-default env options (default: :func:`agents.results.task_options` of the records).
+    ``options``: task -> non-default env options (default: :func:`agents.analysis.results.task_options` of the records).
     The legend lists the methods drawn; methods drawn in no panel are named in a :class:`ResultsWarning`."""
     env_ids = _env_ids(episodes, training)
     specs = _metric_specs(episodes)
@@ -317,7 +317,7 @@ def curves_figure(
         novel = panels[row, -1]
         of_task = episodes.where(task=task)
         rows = (
-            results.aggregate(of_task, column, reps=reps, confidence=confidence, seed=seed, overall=False)
+            scores.aggregate(of_task, column, reps=reps, confidence=confidence, seed=seed, overall=False)
             if len(of_task)
             else []
         )
@@ -326,11 +326,11 @@ def curves_figure(
         chance_drawn |= _decorate(novel, env_id, options.get(task), column, zoom, novel_title, specs.get(task))
         if training is not None:
             left = panels[row, 0]
-            curves = results.training_curves(training.where(task=task), column=training_column, points=points)
+            curves = scores.training_curves(training.where(task=task), column=training_column, points=points)
             rows = [
                 estimate
-                for (_, curve_task), scores in curves.items()
-                for estimate in results.estimate(scores, curve_task, reps=reps, confidence=confidence, seed=seed)
+                for (_, curve_task), method_scores in curves.items()
+                for estimate in scores.estimate(method_scores, curve_task, reps=reps, confidence=confidence, seed=seed)
             ]
             drawn |= _draw_curves(left, rows, colors)
             title_left = f"{title}: training seeds"
@@ -385,7 +385,7 @@ def final_figure(
     options = results.task_options(episodes) if options is None else options
     titles = _titles(env_ids, options)
     colors = _complete(colors, episodes["method"].tolist())
-    rows = results.aggregate(episodes, column, steps="last", reps=reps, confidence=confidence, seed=seed, overall=False)
+    rows = scores.aggregate(episodes, column, steps="last", reps=reps, confidence=confidence, seed=seed, overall=False)
     columns = min(3, len(tasks))
     grid_rows = -(-len(tasks) // columns)
     present = {row["method"] for row in rows}
