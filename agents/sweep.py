@@ -680,7 +680,8 @@ def final_evaluation(run: SweepRun, device: str = "cpu") -> list[dict[str, Any]]
     """The records of the run's last checkpoint on its novel seeds (the run's ``eval`` block: seeds, repetitions,
     sampling seed), kept in ``<run>/evaluation/`` as ``scripts/evaluate.py`` writes them and reused when they are of
     that checkpoint."""
-    from agents.evaluation import evaluate_runs, read_records, seed_list
+    from agents.evaluation.records import read_records, seed_list
+    from agents.evaluation.runs import evaluate_runs
 
     latest = latest_checkpoint(run.run_dir)
     update = checkpoint_update(latest) if latest is not None else finished_update(run.run_dir)
@@ -726,7 +727,7 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
     Runs not finished are left out (and listed). Returns the results directory."""
     from agents.analysis.results import TRAINING_COLUMNS, read_episodes
     from agents.analysis.scores import summarize
-    from agents.evaluation import read_records, write_records
+    from agents.evaluation.records import read_records, write_records
 
     found = statuses(panel.runs)
     finished = [s.run for s in found if s.state == FINISHED]

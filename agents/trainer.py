@@ -3,7 +3,7 @@
 The environments run in-process as one natively batched core, driven by the actor (:mod:`agents.policy.actor`), which
 resets a finished slot right after the step that ended its episode with a seed drawn from the training range by the
 trainer's own generator. Every ``eval.interval`` updates (and after the last one) the current policy plays the
-novel seeds through :func:`agents.evaluation.evaluate`; the records go to ``eval/episodes.csv`` and TensorBoard.
+novel seeds through :func:`agents.evaluation.loop.evaluate`; the records go to ``eval/episodes.csv`` and TensorBoard.
 
 Resuming is exact: checkpoints are taken at update boundaries and hold, besides model, optimizer and every random
 generator, the episode each slot is in (its seed and the actions taken since it started). On resume each slot is
@@ -60,15 +60,8 @@ from agents.config import (
     resume_config,
     sets_length,
 )
-from agents.evaluation import (
-    check_device,
-    evaluate,
-    read_records,
-    record_means,
-    records_csv_text,
-    seed_list,
-    write_records,
-)
+from agents.evaluation.loop import evaluate
+from agents.evaluation.records import read_records, record_means, records_csv_text, seed_list, write_records
 from agents.policy.actor import Actor, refresh_copy, rollout_copy
 from agents.policy.checkpoint import (
     DamagedCheckpoint,
@@ -85,6 +78,7 @@ from agents.policy.checkpoint import (
 )
 from agents.ppo import explained_variance, gae_advantages, ppo_update
 from agents.runtime import faults
+from agents.runtime.devices import check_device
 from agents.runtime.io import atomic_write_text, content_record, now, provenance, write_json_atomic
 from agents.runtime.preemption import Preempted, StopRequests, signal_name
 from agents.runtime.tracking import TrackingError, WandbWriter, scalar_writer, start_wandb

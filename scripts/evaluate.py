@@ -35,7 +35,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a ch
 
 from agents.analysis.scores import format_table  # noqa: E402
 from agents.config import ConfigError  # noqa: E402
-from agents.evaluation import check_device, evaluate_runs, parse_seed_range  # noqa: E402
+from agents.evaluation.records import parse_seed_range  # noqa: E402
+from agents.evaluation.runs import evaluate_runs  # noqa: E402
+from agents.runtime.devices import check_device  # noqa: E402
 from agents.runtime.preemption import EXIT_PREEMPTED, Preempted, raising_preempted  # noqa: E402
 
 SEED_LIMIT = 2**63 - 1  # torch's generator takes seeds up to here

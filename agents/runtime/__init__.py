@@ -3,11 +3,12 @@
 * :mod:`agents.runtime.io`: atomic writes, locks, provenance (git revision, versions, machine), result files;
 * :mod:`agents.runtime.faults`: fault injection (``MEMGYM_FAULT``), the hooks that make a real run fail on purpose;
 * :mod:`agents.runtime.preemption`: SIGTERM / SLURM's warning signal stop work at its next safe point;
-* :mod:`agents.runtime.tracking`: TensorBoard and Weights & Biases writers of a run's scalars.
+* :mod:`agents.runtime.tracking`: TensorBoard and Weights & Biases writers of a run's scalars;
+* :mod:`agents.runtime.devices`: the torch device a run computes on, checked once for training and evaluation.
 
 The first three are standard library only at import time, so that the reference tooling (``scripts/reference/``,
-run in memory-gym's own venv) can import them; this face therefore re-exports their names only. Tracking reads the
-config (a floor below), so its names are imported from :mod:`agents.runtime.tracking` itself.
+run in memory-gym's own venv) can import them; this face therefore re-exports their names only. Tracking and
+devices read the config (a floor below) and torch, so their names are imported from their own modules.
 """
 
 from __future__ import annotations

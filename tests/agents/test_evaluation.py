@@ -13,7 +13,9 @@ import yaml
 from PIL import Image, ImageSequence
 
 from agents.config import config_from_dict
-from agents.evaluation import RECORD_COLUMNS, EpisodeVideo, evaluate, labelled_frame, parse_seed_range, read_records
+from agents.evaluation.loop import evaluate
+from agents.evaluation.records import RECORD_COLUMNS, parse_seed_range, read_records
+from agents.evaluation.videos import EpisodeVideo, labelled_frame
 from agents.policy.checkpoint import load_policy
 from agents.trainer import Trainer
 from scripts import evaluate as evaluate_script

@@ -16,7 +16,8 @@ from agents.analysis.metrics import metric_of
 from agents.analysis.plots import curves_figure, final_figure
 from agents.analysis.results import read_episodes
 from agents.config import ConfigError, config_from_dict, task_name
-from agents.evaluation import evaluate, seed_list, write_records
+from agents.evaluation.loop import evaluate
+from agents.evaluation.records import seed_list, write_records
 from agents.memory import MEMORY_MODULES
 from agents.trainer import Trainer
 from envs.gymnasium_core import GymnasiumCore, SeedingError, UnsupportedSpaceError

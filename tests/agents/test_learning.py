@@ -88,7 +88,7 @@ def test_memories_learn_proof_of_memory_and_succeed_on_novel_seeds(tmp_path: Pat
     and keep >= 0.95 success on 30 novel seeds x 5 repetitions, evaluated through the same actor with sampled actions
     (measured: TrXL 0.998 in the last updates; LRU 0.99, FFM 1.0, Mamba 0.99 on novel seeds; Mamba-2 0.99 in its
     last update)."""
-    from agents.evaluation import evaluate
+    from agents.evaluation.loop import evaluate
 
     config = load_config(CONFIGS / f"{memory}.yaml", ["run.progress_bar=false"])
     assert config.model.memory == memory and not config.model.previous_action

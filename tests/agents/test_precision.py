@@ -13,7 +13,7 @@ import torch
 from torch import nn
 
 from agents.config import ModelConfig, config_from_dict
-from agents.evaluation import evaluate
+from agents.evaluation.loop import evaluate
 from agents.memory import MEMORY_MODULES, build_memory
 from agents.memory.scan import ScanMemory
 from agents.trainer import Trainer

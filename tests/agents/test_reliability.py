@@ -21,9 +21,10 @@ import pytest
 import torch
 import yaml
 
-from agents import evaluation
 from agents.config import config_from_dict
-from agents.evaluation import evaluate_runs, read_records
+from agents.evaluation import runs as evaluation_runs
+from agents.evaluation.records import read_records
+from agents.evaluation.runs import evaluate_runs
 from agents.policy.checkpoint import DamagedCheckpoint, latest_checkpoint, read_checkpoint, write_checkpoint
 from agents.runtime import faults
 from agents.runtime.faults import FaultSpecError, parse_faults
@@ -415,7 +416,7 @@ def test_a_preempted_evaluation_leaves_its_files_whole_and_together(
     assert "pre-empted: evaluation stopped by SIGTERM" in stopped.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert {entry["run"] for entry in summary["run_directories"]} == runs
-    evaluation._existing(out)  # every file is what summary.json recorded
+    evaluation_runs._existing(out)  # every file is what summary.json recorded
     assert {record["run"] for record in read_records(out / "episodes.csv")} == runs
 
 
@@ -436,13 +437,13 @@ def test_two_evaluations_into_one_directory_at_once_keep_every_record(
     """Both evaluations read the (empty) directory before either writes: the second to write merges into what the
     first wrote instead of replacing it."""
     both_read = threading.Barrier(2, timeout=60)
-    play = evaluation.evaluate
+    play = evaluation_runs.evaluate
 
     def evaluate_after_both_read(*args, **kwargs):
         both_read.wait()
         return play(*args, **kwargs)
 
-    monkeypatch.setattr(evaluation, "evaluate", evaluate_after_both_read)
+    monkeypatch.setattr(evaluation_runs, "evaluate", evaluate_after_both_read)
     out = tmp_path / "out"
     errors: list[BaseException] = []
 

@@ -15,7 +15,8 @@ import torch
 from agents.analysis.plots import curves_figure
 from agents.analysis.results import read_episodes, read_results
 from agents.config import config_from_dict
-from agents.evaluation import evaluate_runs, read_records, unique_run_names
+from agents.evaluation.records import read_records
+from agents.evaluation.runs import evaluate_runs, unique_run_names
 from agents.trainer import Trainer
 from scripts import evaluate as evaluate_script
 from tests.agents.test_evaluation import TINY

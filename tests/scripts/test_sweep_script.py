@@ -18,7 +18,7 @@ import pytest
 import torch
 import yaml
 
-from agents.evaluation import read_records
+from agents.evaluation.records import read_records
 from agents.policy.checkpoint import checkpoint_update, latest_checkpoint
 from agents.slurm import wait_for_jobs
 from agents.sweep import FINISHED, load_panel, run_status

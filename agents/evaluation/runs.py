@@ -1,10 +1,6 @@
-"""Scoring a policy on novel seeds: every seed x repetition played at once in one batched core, through the actor.
-
-Slot ``i`` plays seed ``seeds[i // repetitions]``; repetitions of a seed differ only by the sampled actions (the
-paper samples; ``greedy`` takes the argmax). Each finished episode becomes one record (:data:`RECORD_COLUMNS`, then
-the environment's own end-of-episode metrics). The trainer calls :func:`evaluate` during training and
-``scripts/evaluate.py`` calls it on saved checkpoints: with the same weights, seeds and sampling seed both give the
-same records.
+"""Evaluating run directories: checkpoints of several runs on novel seeds, planned and checked before anything runs,
+merged into one results directory (``episodes.csv``, ``training.csv``, ``summary.json``), every file written
+atomically under the directory's lock.
 """
 
 from __future__ import annotations
@@ -12,221 +8,33 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import tempfile
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import torch
-
-from agents.analysis.digest import config_digest, describe_differences, env_options_text, experiment_settings
-from agents.analysis.metrics import METRICS, SPEC_COLUMN, metric_of, metric_spec
-from agents.analysis.results import EPISODE_COLUMNS, TRAINING_COLUMNS, read_episodes
+from agents.analysis.digest import config_digest, describe_differences, experiment_settings
+from agents.analysis.results import TRAINING_COLUMNS, read_episodes
 from agents.analysis.scores import summarize as summarize_episodes
-from agents.config import Config, check_disjoint_seeds, is_device_name
-from agents.policy.actor import Actor, Outcome
-from agents.policy.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
-from agents.policy.models import ActorCritic
-from agents.runtime.faults import active_faults
-from agents.runtime.io import (
-    atomic_write_bytes,
-    atomic_write_text,
-    content_record,
-    exclusive_lock,
-    provenance,
-    write_json_atomic,
+from agents.config import Config, check_disjoint_seeds
+from agents.evaluation.loop import evaluate
+from agents.evaluation.records import (
+    describe_seeds,
+    parse_seed_range,
+    read_records,
+    records_csv_text,
+    seed_list,
+    write_records,
 )
+from agents.evaluation.videos import EpisodeVideo
+from agents.policy.checkpoint import checkpoint_update, list_checkpoints, load_policy, run_config
+from agents.runtime.devices import check_device
+from agents.runtime.faults import active_faults
+from agents.runtime.io import atomic_write_bytes, content_record, exclusive_lock, provenance, write_json_atomic
 from agents.runtime.preemption import deferred_signals
 
-RECORD_COLUMNS = list(EPISODE_COLUMNS)  # the first columns of episodes.csv, in this order
 LOCK_FILE = ".lock"  # in an evaluation's results directory: held while it is read and while it is merged into
-# called with the actor once before the first decision (outcome None) and after every decision with its outcome
-FrameHook = Callable[[Actor, Outcome | None], None]
-
-
-def evaluate(
-    model: ActorCritic,
-    helm: Any,
-    config: Config,
-    seeds: Sequence[int],
-    repetitions: int,
-    *,
-    greedy: bool = False,
-    sampling_seed: int = 0,
-    step: int = 0,
-    run: str = "",
-    device: torch.device | str = "cpu",
-    progress: bool = False,
-    on_frame: FrameHook | None = None,
-    core: Any = None,
-) -> list[dict[str, Any]]:
-    """Play ``repetitions`` episodes of every seed with ``model`` and return one record per episode, ordered by
-    seed then repetition. ``core``: a batched core with ``len(seeds) * repetitions`` slots to reuse."""
-    slots = len(seeds) * repetitions
-    if core is None:
-        core = config.env.make_core(slots)
-    elif core.num_envs != slots:
-        raise ValueError(f"the core has {core.num_envs} slots, the evaluation needs {slots}")
-    generator = torch.Generator(device=device)
-    generator.manual_seed(sampling_seed)
-    actor = Actor(core, model, config, generator, helm, device)
-    slot_seeds = [int(seed) for seed in seeds for _ in range(repetitions)]
-    actor.start(slot_seeds)
-    finals: dict[int, dict[str, Any]] = {}
-    bar = _progress(slots, progress)
-    if on_frame is not None:
-        on_frame(actor, None)
-    while actor.active.any():
-        outcome = actor.advance(actor.decide(greedy))
-        finals.update(outcome.finals)
-        if bar is not None and outcome.finals:
-            bar.update(len(outcome.finals))
-        if on_frame is not None:
-            on_frame(actor, outcome)
-    if bar is not None:
-        bar.close()
-    metric = metric_of(config.env.id, config.env.metric)
-    spec = {} if METRICS.get(config.env.id) is metric else {SPEC_COLUMN: metric_spec(metric)}  # plots read it
-    options, digest = (
-        env_options_text(config),
-        config_digest(config, greedy),
-    )  # the columns agents.analysis.results checks
-    records = []
-    for slot in range(slots):
-        info = finals[slot]
-        extra = {key: _number(value) for key, value in sorted(info.items()) if key not in ("reward", "length")}
-        records.append(
-            {
-                "run": run,
-                "method": config.method,
-                "task": config.task,
-                "env_id": config.env.id,
-                "step": step,
-                "seed": slot_seeds[slot],
-                "repetition": slot % repetitions,
-                "return": float(info["reward"]),
-                "length": int(info["length"]),
-                "metric": float(metric.value(info)),
-                "metric_reference": float(metric.reference(info)),
-                "env_options": options,
-                "config_digest": digest,
-                **spec,
-                **{key: value for key, value in extra.items() if _is_number(value)},
-            }
-        )
-    return records
-
-
-def seed_list(seeds: Sequence[int]) -> list[int]:
-    """An inclusive [low, high] range as the list of its seeds."""
-    low, high = seeds
-    return list(range(int(low), int(high) + 1))
-
-
-def record_means(records: Iterable[dict[str, Any]]) -> dict[str, float]:
-    """Mean of every numeric column of some records (return, length, metric, the environment's metrics)."""
-    records = list(records)
-    skip = {"step", "seed", "repetition"}
-    keys = sorted({k for r in records for k, v in r.items() if _is_number(v)} - skip)
-    return {key: float(np.mean([float(r[key]) for r in records if _is_number(r.get(key))])) for key in keys}
-
-
-def write_records(path: str | Path, records: Sequence[dict[str, Any]]) -> None:
-    """Write records as CSV atomically (:func:`records_csv_text`)."""
-    atomic_write_text(path, records_csv_text(records))
-
-
-def records_csv_text(records: Sequence[dict[str, Any]]) -> str:
-    """Records as CSV: :data:`RECORD_COLUMNS` first, then every other key in sorted order."""
-    extra = sorted({key for record in records for key in record} - set(RECORD_COLUMNS))
-    text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=RECORD_COLUMNS + extra, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(records)
-    return text.getvalue()
-
-
-def read_records(path: str | Path, skip_malformed: bool = False) -> list[dict[str, Any]]:
-    """Records written by :func:`write_records`, numbers parsed (empty cells dropped). ``skip_malformed`` leaves out
-    rows with too few or too many cells (a line cut short) instead of returning them with holes."""
-    with open(path, newline="") as handle:
-        rows = list(csv.DictReader(handle))
-    if skip_malformed:
-        rows = [row for row in rows if None not in row and None not in row.values()]
-    return [{k: _parse(v) for k, v in row.items() if v != ""} for row in rows]
-
-
-def _parse(text: str) -> Any:
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            continue
-    return text
-
-
-def _number(value: Any) -> Any:
-    """Booleans as 0/1 (the environments report some flags as bools, others as ints)."""
-    return int(value) if isinstance(value, bool | np.bool_) else value
-
-
-def _is_number(value: Any) -> bool:
-    return (
-        isinstance(value, int | float | np.integer | np.floating)
-        and not isinstance(value, bool)
-        and (not isinstance(value, float) or math.isfinite(value))
-    )
-
-
-def _progress(total: int, enabled: bool) -> Any:
-    if not enabled:
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="episode", dynamic_ncols=True, leave=False)
-
-
-# --------------------------------------------------------------------------------------- evaluating run directories
-def parse_seed_range(text: str) -> list[int]:
-    """``LOW..HIGH`` (both ends included, like the config's ``eval.seeds``) or ``LOW:HIGH`` (HIGH excluded, as a
-    Python range) -> the inclusive [low, high] of those seeds."""
-    inclusive = ".." in text
-    low, sep, high = text.partition(".." if inclusive else ":")
-    try:
-        first, last = int(low), int(high) - (0 if inclusive else 1)
-    except ValueError:
-        first, last = -1, -2
-    if not sep or first < 0 or last < first:
-        raise ValueError(
-            f"--seeds {text!r} is invalid: expected LOW..HIGH (both ends included, 0 <= LOW <= HIGH, e.g. "
-            "100000..100029) or LOW:HIGH (HIGH excluded, 0 <= LOW < HIGH, e.g. 100000:100030)"
-        )
-    return [first, last]
-
-
-def describe_seeds(seed_range: Sequence[int]) -> str:
-    """An inclusive [low, high] as the command line prints it: ``novel seeds 100000..100029 (30 seeds)``."""
-    low, high = int(seed_range[0]), int(seed_range[1])
-    count = high - low + 1
-    return f"novel seeds {low}..{high} ({count} seed{'' if count == 1 else 's'})"
-
-
-def check_device(name: str, key: str = "device") -> torch.device:
-    """``cpu``, ``cuda`` or ``cuda:N``, usable on this machine (torch itself would fail later, on a CPU-only build
-    with a bare AssertionError); a ValueError naming ``key``, the device and the valid choices otherwise. Training
-    (``run.device``) and evaluation (``--device``) both check here."""
-    if not is_device_name(name):
-        raise ValueError(f"{key} {name!r} is invalid; valid choices: 'cpu', 'cuda', 'cuda:N'")
-    if name != "cpu":
-        if not torch.cuda.is_available():
-            raise ValueError(f"{key} {name!r}, but CUDA is not available here; use 'cpu'")
-        count, index = torch.cuda.device_count(), int(name[5:] or 0)
-        if index >= count:
-            raise ValueError(f"{key} {name!r}, but this machine has {count} CUDA device(s): cuda:0..cuda:{count - 1}")
-    return torch.device(name)
 
 
 def select_checkpoints(run_dir: Path, which: str, batch_size: int) -> list[Path]:
@@ -676,94 +484,3 @@ def _merge_into(
             atomic_write_bytes(out / "training.csv", training_text)
         write_json_atomic(out / "summary.json", summary, sort_keys=False)
     return summary
-
-
-class EpisodeVideo:
-    """Frames of the first ``episodes`` slots of an evaluation, written as one GIF per episode: the agent's view
-    (upscaled) beside the ground-truth debug view, each labelled above, and below them the step, the action just
-    taken, its reward and the episode's running return."""
-
-    VIEWS = ("agent's view", "ground truth")
-
-    def __init__(self, episodes: int) -> None:
-        self.episodes = episodes
-        self.frames: list[list[np.ndarray]] = [[] for _ in range(episodes)]
-        self.captions: list[list[str]] = [[] for _ in range(episodes)]
-        self.returns = [0.0] * episodes
-        self.ended = [False] * episodes
-
-    def __call__(self, actor: Actor, outcome: Outcome | None) -> None:
-        core = actor.core
-        rewards = None if outcome is None else outcome.rewards.float().cpu().numpy()
-        for slot in range(self.episodes):
-            if self.ended[slot]:
-                continue
-            self.ended[slot] = not actor.active[slot]  # every frame while the slot plays, its last one included
-            step = len(self.frames[slot])
-            if rewards is None:
-                caption = f"step 0   return {self.returns[slot]:.2f}"
-            else:
-                reward = float(rewards[slot])
-                self.returns[slot] += reward
-                action = _action_text(actor.memory.actions[slot][-1])
-                caption = f"step {step}   action {action}   reward {reward:+.2f}   return {self.returns[slot]:.2f}"
-            agent = core.agent_frame(slot)
-            debug = core.debug_frame(slot)
-            scale = debug.shape[0] // agent.shape[0]
-            agent = np.repeat(np.repeat(agent, scale, axis=0), scale, axis=1)
-            self.frames[slot].append(np.concatenate((agent, debug), axis=1))
-            self.captions[slot].append(caption)
-
-    def write(self, directory: Path, name: str, records: Sequence[dict[str, Any]]) -> list[Path]:
-        paths = []
-        for slot, frames in enumerate(self.frames):
-            if not frames:
-                continue
-            record = records[slot]
-            path = directory / f"{name}-seed{record['seed']}-rep{record['repetition']}.gif"
-            captions = self.captions[slot]
-            images = [labelled_frame(frame, self.VIEWS, text) for frame, text in zip(frames, captions, strict=True)]
-            data = io.BytesIO()
-            images[0].save(data, format="GIF", save_all=True, append_images=images[1:], duration=80, loop=0)
-            atomic_write_bytes(path, data.getvalue())
-            paths.append(path)
-        return paths
-
-
-def _action_text(action: np.ndarray) -> str:
-    """One branch as its index, several as a tuple (MultiDiscrete)."""
-    values = [int(value) for value in np.ravel(action)]
-    return str(values[0]) if len(values) == 1 else "(" + ", ".join(map(str, values)) + ")"
-
-
-def labelled_frame(frame: np.ndarray, views: Sequence[str], caption: str) -> Any:
-    """``frame`` (views side by side, equally wide) as a PIL image with a black band above naming each view and
-    one below holding ``caption``; the text is sized to the frame (Pillow's bundled font, no extra dependency)."""
-    from PIL import Image, ImageDraw
-
-    height, width = frame.shape[:2]
-    font = _font(max(12, height // 22))
-    band = int(font.size * 1.6) if hasattr(font, "size") else 16
-    canvas = Image.new("RGB", (width, height + 2 * band))
-    canvas.paste(Image.fromarray(np.ascontiguousarray(frame[..., :3])), (0, band))
-    draw = ImageDraw.Draw(canvas)
-    part = width / len(views)
-
-    def put(text: str, centre_x: float, top: int) -> None:
-        left, upper, right, lower = draw.textbbox((0, 0), text, font=font)
-        x = max(2, centre_x - (right - left) / 2)
-        draw.text((x, top + (band - (lower - upper)) / 2 - upper), text, fill=(255, 255, 255), font=font)
-
-    for index, view in enumerate(views):
-        put(view, part * (index + 0.5), 0)
-    put(caption, width / 2, height + band)
-    return canvas
-
-
-def _font(size: int) -> Any:
-    from PIL import ImageFont
-
-    try:
-        return ImageFont.load_default(size=size)  # scalable with FreeType (Pillow >= 10.1)
-    except (TypeError, ImportError, OSError):
-        return ImageFont.load_default()
