@@ -472,7 +472,7 @@ def prepare_run(run: SweepRun, torch_threads: int = 0) -> Path:
 def train_run(run_dir: str | Path, echo: Echo = print) -> str:
     """Train a prepared run directory to its end: from scratch without a checkpoint, else from the newest one.
     Returns ``finished`` (nothing was left to do), ``trained`` or ``busy`` (another process holds the run)."""
-    from agents.trainer import Trainer  # imported here: the sweep's planning does not need torch's start-up cost
+    from agents.training.trainer import Trainer
 
     run_dir = Path(run_dir)
     with run_lock(run_dir) as held:
@@ -993,7 +993,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("usage: python -m agents.sweep RUN_DIR", file=sys.stderr)
         return 2
     from agents.runtime.preemption import Preempted
-    from agents.trainer import TrainingDiverged, WriteFailed
+    from agents.training.trainer import TrainingDiverged, WriteFailed
 
     try:
         result = train_run(args[0], echo=lambda text: print(text, flush=True))

@@ -63,10 +63,10 @@ import numpy as np  # noqa: E402
 
 from agents.config import Config, load_config  # noqa: E402
 from agents.policy.models import log_probs_and_entropy  # noqa: E402
-from agents.ppo import filled_index  # noqa: E402
 from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
-from agents.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
-from agents.trainer import Trainer  # noqa: E402
+from agents.training.ppo import filled_index  # noqa: E402
+from agents.training.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
+from agents.training.trainer import Trainer  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"

@@ -48,7 +48,8 @@ from agents.policy.checkpoint import checkpoint_damage, checkpoint_update, lates
 from agents.runtime.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
 from agents.runtime.tracking import TrackingError  # noqa: E402
 from agents.sweep import SweepError, SweepRun, load_panel, run_coordinates, select_runs  # noqa: E402
-from agents.trainer import Trainer, TrainingDiverged, WriteFailed, default_run_dir  # noqa: E402
+from agents.training.logs import default_run_dir  # noqa: E402
+from agents.training.trainer import Trainer, TrainingDiverged, WriteFailed  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:

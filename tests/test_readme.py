@@ -37,7 +37,7 @@ def test_what_the_project_says_it_has_exists() -> None:
 
     from agents.config import config_from_dict
     from agents.policy.models import MEMORY_MODULES
-    from agents.trainer import Trainer
+    from agents.training.trainer import Trainer
 
     description = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["description"]
     assert "Transformer-XL" in description and "trxl" in MEMORY_MODULES

@@ -338,13 +338,13 @@ class ActorCritic(nn.Module):
         ground_truth: Tensor | None = None,
     ) -> tuple[list[Tensor], Tensor, dict[str, Tensor]]:
         """Training: the N real steps of S sequences (flat, in sequence order), the memory records the buffer
-        gathered for them (:meth:`agents.buffer.RolloutBuffer.memory_records`: a recurrent memory's start states
-        (S, ...)), their padding mask (S, P) and each step's ``episode_step`` (N,). Returns logits and values of the N
-        steps and the auxiliary losses asked for, by their logged names: with ``reconstruct`` the
+        gathered for them (:meth:`agents.training.buffer.RolloutBuffer.memory_records`: a recurrent memory's start
+        states (S, ...)), their padding mask (S, P) and each step's ``episode_step`` (N,). Returns logits and values of
+        the N steps and the auxiliary losses asked for, by their logged names: with ``reconstruct`` the
         observation-reconstruction loss of those steps (``reconstruction_loss``), with ``ground_truth`` (N, G), the
         targets of those steps, the ground-truth estimator's mean squared error (``ground_truth_loss``).
 
-        ``inputs`` may hold filler rows after the N real ones (see :func:`agents.ppo.filled_index`): they pass
+        ``inputs`` may hold filler rows after the N real ones (see :func:`agents.training.ppo.filled_index`): they pass
         through the layers that act on single steps, so those keep a few fixed shapes, but they never enter the
         memory and are dropped from the outputs, so they change no output and no gradient."""
         features = self.encode(inputs)

@@ -4,7 +4,8 @@
 * :mod:`agents.runtime.faults`: fault injection (``MEMGYM_FAULT``), the hooks that make a real run fail on purpose;
 * :mod:`agents.runtime.preemption`: SIGTERM / SLURM's warning signal stop work at its next safe point;
 * :mod:`agents.runtime.tracking`: TensorBoard and Weights & Biases writers of a run's scalars;
-* :mod:`agents.runtime.devices`: the torch device a run computes on, checked once for training and evaluation.
+* :mod:`agents.runtime.devices`: the torch device a run computes on, checked once for training and evaluation;
+* :mod:`agents.runtime.allocator`: the C allocator keeps freed memory for torch's CPU tensors (set by training).
 
 The first three are standard library only at import time, so that the reference tooling (``scripts/reference/``,
 run in memory-gym's own venv) can import them; this face therefore re-exports their names only. Tracking and

@@ -3,8 +3,8 @@
 The environment variable ``MEMGYM_FAULT`` holds one fault or several separated by ``;``. Nothing happens while it
 is unset or empty; a malformed value is a :class:`FaultSpecError` naming the bad part and the valid choices. The
 hooks are read by :func:`agents.runtime.io.atomic_write_bytes` (every checkpoint, record and summary goes through it)
-and by the trainer's update (:meth:`agents.trainer.Trainer.train_update`), so a test outside the repository can set the
-variable on a ``scripts/train.py``, ``scripts/sweep.py`` or ``scripts/evaluate.py`` process and inject:
+and by the trainer's update (:meth:`agents.training.trainer.Trainer.train_update`), so a test outside the repository can
+set the variable on a ``scripts/train.py``, ``scripts/sweep.py`` or ``scripts/evaluate.py`` process and inject:
 
 ``write:<glob>:<n>:<stage>:<action>``
     at the ``n``-th atomic write (1-based, counted per process) of a file whose name matches ``<glob>`` (fnmatch on

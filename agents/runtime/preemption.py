@@ -1,9 +1,9 @@
 """Pre-emption: SIGTERM, and the warning signal SLURM sends before a job is stopped (SIGUSR2 as submitit asks for it,
 or the signal its ``SUBMITIT_PREEMPT_SIGNAL`` names), stop work at its next safe point instead of wherever it is.
 
-* Training (:meth:`agents.trainer.Trainer.train`): the signal is noted, the update in progress finishes, a checkpoint
-  is written and ``train()`` raises :class:`Preempted`; ``scripts/train.py`` and the sweep's worker then exit with
-  :data:`EXIT_PREEMPTED`. If the signal had a Python handler before training began (submitit's, which requeues the
+* Training (:meth:`agents.training.trainer.Trainer.train`): the signal is noted, the update in progress finishes, a
+  checkpoint is written and ``train()`` raises :class:`Preempted`; ``scripts/train.py`` and the sweep's worker then exit
+  with :data:`EXIT_PREEMPTED`. If the signal had a Python handler before training began (submitit's, which requeues the
   job), that handler receives it after the checkpoint instead.
 * The sweep's local launcher (:func:`agents.sweep.launch_local`) passes the signal on to every run it trains, starts
   no new one, waits for their checkpoints and reports them as pre-empted (resumable, not failed); ``scripts/sweep.py``

@@ -12,7 +12,7 @@ import envs
 from agents.config import config_from_dict
 from agents.policy.actor import Actor, grayscale
 from agents.policy.checkpoint import build_agent
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 
 
 def _config(env_id: str, *overrides: str):

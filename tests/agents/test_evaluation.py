@@ -17,7 +17,7 @@ from agents.evaluation.loop import evaluate
 from agents.evaluation.records import RECORD_COLUMNS, parse_seed_range, read_records
 from agents.evaluation.videos import EpisodeVideo, labelled_frame
 from agents.policy.checkpoint import load_policy
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 from scripts import evaluate as evaluate_script
 
 TINY = {

@@ -18,9 +18,9 @@ from agents.config import config_from_dict, load_config
 from agents.policy.actor import Actor
 from agents.policy.checkpoint import build_agent, ground_truth_size, load_policy
 from agents.policy.models import ActorCritic
-from agents.sequences import pad_sequences, split_sequences
 from agents.sweep import load_panel, parameter_count
-from agents.trainer import Trainer
+from agents.training.sequences import pad_sequences, split_sequences
+from agents.training.trainer import Trainer
 
 ROOT = Path(__file__).resolve().parents[2]
 ENDLESS = ["Endless-MortarMayhem-v0", "Endless-MysteryPath-v0", "Endless-SearingSpotlights-v0"]

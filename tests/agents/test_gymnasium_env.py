@@ -19,7 +19,7 @@ from agents.config import ConfigError, config_from_dict, task_name
 from agents.evaluation.loop import evaluate
 from agents.evaluation.records import seed_list, write_records
 from agents.memory import MEMORY_MODULES
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 from envs.gymnasium_core import GymnasiumCore, SeedingError, UnsupportedSpaceError
 from tests.support.interrupt import kill_after
 from tests.support.tiny_env import ENV_ID, TinyMemoryEnv

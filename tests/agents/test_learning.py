@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from agents.config import load_config
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs" / "proof_of_memory"
 

@@ -18,8 +18,8 @@ from agents.policy.models import (
     log_probs_and_entropy,
     model_inputs,
 )
-from agents.ppo import filled_index
-from agents.sequences import Sequences, pad_sequences, split_sequences
+from agents.training.ppo import filled_index
+from agents.training.sequences import Sequences, pad_sequences, split_sequences
 
 IMAGE = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
 DICT = gym.spaces.Dict({"visual_observation": IMAGE, "vector_observation": gym.spaces.Box(-1.0, 1.0, (5,), np.float32)})

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import torch
 
-from agents.buffer import RolloutBuffer
 from agents.config import ModelConfig, PPOConfig
 from agents.policy.models import ActorCritic
-from agents.ppo import explained_variance, gae_advantages, normalize, ppo_loss, ppo_update
-from agents.sequences import pad_sequences, split_sequences
+from agents.training.buffer import RolloutBuffer
+from agents.training.ppo import explained_variance, gae_advantages, normalize, ppo_loss, ppo_update
+from agents.training.sequences import pad_sequences, split_sequences
 
 
 def test_gae_stops_at_episode_ends_and_bootstraps_the_rollout_end() -> None:

@@ -16,7 +16,7 @@ from agents.config import ModelConfig, config_from_dict
 from agents.evaluation.loop import evaluate
 from agents.memory import MEMORY_MODULES, build_memory
 from agents.memory.scan import ScanMemory
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 from scripts import benchmark_training
 
 TINY = {

@@ -29,7 +29,8 @@ from agents.policy.checkpoint import DamagedCheckpoint, latest_checkpoint, read_
 from agents.runtime import faults
 from agents.runtime.faults import FaultSpecError, parse_faults
 from agents.runtime.preemption import EXIT_PREEMPTED, Preempted, deferred_signals, raising_preempted
-from agents.trainer import Trainer, TrainingDiverged, WriteFailed, training_log_text
+from agents.training.logs import training_log_text
+from agents.training.trainer import Trainer, TrainingDiverged, WriteFailed
 from scripts import train as train_script
 from tests.support.interrupt import kill_after
 from tests.support.tiny_run import tiny_run, with_run

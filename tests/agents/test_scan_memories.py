@@ -13,7 +13,7 @@ from agents.config import ConfigError, LruConfig, ModelConfig, config_from_dict
 from agents.memory import build_memory, memory_class
 from agents.memory.mamba2 import state_space_dual
 from agents.memory.scan import linear_scan, reference_scan
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 from tests.support.external_memory import LeakyMemory
 
 SCAN_MEMORIES = ("lru", "ffm", "mamba", "mamba2")

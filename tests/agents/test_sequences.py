@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from agents.sequences import minibatch_ids, pad_sequences, split_sequences
+from agents.training.sequences import minibatch_ids, pad_sequences, split_sequences
 
 
 def _terminated(rows: list[str]) -> np.ndarray:

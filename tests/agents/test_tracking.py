@@ -17,7 +17,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from agents.config import ConfigError, config_from_dict, config_to_dict
 from agents.policy.checkpoint import check_checkpoint_config
 from agents.runtime.io import git_revision
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 from tests.support.interrupt import kill_after
 
 TINY = {

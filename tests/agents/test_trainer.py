@@ -18,8 +18,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from agents.config import config_from_dict, load_config
 from agents.policy.checkpoint import latest_checkpoint
 from agents.policy.models import log_probs_and_entropy, one_hot_actions
-from agents.sequences import pad_sequences, split_sequences
-from agents.trainer import Trainer, TrainingDiverged
+from agents.training.sequences import pad_sequences, split_sequences
+from agents.training.trainer import Trainer, TrainingDiverged
 from scripts import train as train_script
 from tests.support.dict_env import DictCore
 from tests.support.interrupt import kill_after
@@ -420,7 +420,7 @@ def test_a_config_with_a_grid_is_refused(tmp_path: Path) -> None:
 def test_freed_tensor_memory_is_reused_without_page_faults() -> None:
     import resource
 
-    from agents.trainer import keep_freed_memory
+    from agents.runtime.allocator import keep_freed_memory
 
     assert keep_freed_memory()
 

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 import torch
 
-from agents.buffer import RolloutBuffer
 from agents.config import ConfigError, TrxlConfig, config_from_dict
 from agents.memory import TransformerXL
 from agents.memory.transformer import shift_window
 from agents.policy.actor import refresh_copy
-from agents.sequences import pad_sequences, split_sequences
-from agents.trainer import Trainer
+from agents.training.buffer import RolloutBuffer
+from agents.training.sequences import pad_sequences, split_sequences
+from agents.training.trainer import Trainer
 
 FEATURES = 5
 

@@ -17,7 +17,7 @@ from agents.analysis.results import read_episodes, read_results
 from agents.config import config_from_dict
 from agents.evaluation.records import read_records
 from agents.evaluation.runs import evaluate_runs, unique_run_names
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 from scripts import evaluate as evaluate_script
 from tests.agents.test_evaluation import TINY
 

@@ -82,7 +82,7 @@ def test_resuming_a_finished_run_says_so_and_changes_nothing(
 ) -> None:
     """No 'resumed' entry in run_info.json, no new (empty) event file, no rewritten log: the directory stays
     byte for byte what it was, and the trainer itself does nothing either."""
-    from agents.trainer import Trainer
+    from agents.training.trainer import Trainer
 
     run_dir = _trained(tmp_path, config_file)
     capsys.readouterr()
@@ -181,7 +181,7 @@ def test_a_resume_takes_the_settings_no_record_depends_on_and_ends_as_an_uninter
     come out byte for byte those of the run trained in one go with the old settings. The command says which
     checkpoint it resumes from and what it dropped past it (one row of training.csv, one evaluation's records)."""
     from agents.config import load_config
-    from agents.trainer import Trainer
+    from agents.training.trainer import Trainer
     from tests.support.interrupt import kill_after
 
     whole = tmp_path / "whole" / "run"
@@ -228,7 +228,7 @@ def test_a_resume_by_hand_takes_another_thread_count_and_says_it_ends_bit_exactn
     digest), so a resume takes it, says that the run's floats now differ from an uninterrupted run's, records it,
     and the checkpoint written before still loads under the new config.yaml."""
     from agents.config import load_config
-    from agents.trainer import Trainer
+    from agents.training.trainer import Trainer
     from tests.support.interrupt import kill_after
 
     run_dir = tmp_path / "run"

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from agents.trainer import Trainer
+from agents.training.trainer import Trainer
 
 
 def kill_after(trainer: Trainer, updates: int) -> None:

@@ -14,8 +14,9 @@ the same weights, logs and records as an uninterrupted one.
 Faults (docs/reliability.md): a pre-emption signal (:mod:`agents.runtime.preemption`) ends the run after the update in
 progress, with a checkpoint (:class:`Preempted`); a non-finite loss, gradient or weight stops it at that update
 (:class:`TrainingDiverged`) and a failed write at that file (:class:`WriteFailed`), the newest checkpoint intact.
-Every checkpoint records what ``training.csv`` and ``eval/episodes.csv`` held at its step (:func:`run_records`), and a
-resume takes the newest checkpoint that is intact and matches them (:func:`agents.policy.checkpoint.intact_checkpoint`).
+Every checkpoint records what ``training.csv`` and ``eval/episodes.csv`` held at its step
+(:func:`agents.training.logs.run_records`), and a resume takes the newest checkpoint that is intact and matches them
+(:func:`agents.policy.checkpoint.intact_checkpoint`).
 
 A run can be lengthened when it resumes (``Trainer.resume(run_dir, ["run.total_steps=N"])``):
 ``config.yaml`` then holds the new length, ``run_info.json`` records the extension, and the schedules that decay over
@@ -27,13 +28,8 @@ may also change the settings no record depends on (progress bar, checkpoint inte
 from __future__ import annotations
 
 import contextlib
-import csv
-import datetime
-import io
 import json
-import math
 import os
-import platform
 import random
 import sys
 import time
@@ -47,13 +43,8 @@ import torch
 
 from agents.analysis.digest import config_digest
 from agents.analysis.metrics import metric_of
-from agents.analysis.results import TRAINING_COLUMNS
-from agents.buffer import RolloutBuffer
 from agents.config import (
-    LENGTH_KEY,
     Config,
-    ConfigError,
-    config_from_dict,
     config_to_dict,
     dump_config,
     resume_changes,
@@ -61,10 +52,9 @@ from agents.config import (
     sets_length,
 )
 from agents.evaluation.loop import evaluate
-from agents.evaluation.records import read_records, record_means, records_csv_text, seed_list, write_records
+from agents.evaluation.records import record_means, seed_list, write_records
 from agents.policy.actor import Actor, refresh_copy, rollout_copy
 from agents.policy.checkpoint import (
-    DamagedCheckpoint,
     build_agent,
     check_checkpoint_config,
     check_helm,
@@ -76,13 +66,28 @@ from agents.policy.checkpoint import (
     run_config,
     write_checkpoint,
 )
-from agents.ppo import explained_variance, gae_advantages, ppo_update
 from agents.runtime import faults
+from agents.runtime.allocator import keep_freed_memory
 from agents.runtime.devices import check_device
-from agents.runtime.io import atomic_write_text, content_record, now, provenance, write_json_atomic
+from agents.runtime.io import atomic_write_text, now, write_json_atomic
 from agents.runtime.preemption import Preempted, StopRequests, signal_name
 from agents.runtime.tracking import TrackingError, WandbWriter, scalar_writer, start_wandb
-from agents.sequences import split_sequences
+from agents.training.buffer import RolloutBuffer
+from agents.training.logs import (
+    TrainingLog,
+    check_run_records,
+    evaluation_records,
+    extend_run,
+    log_scalars,
+    progress_bar,
+    records_past,
+    run_info,
+    run_records,
+    show_progress,
+    summary_writer,
+)
+from agents.training.ppo import explained_variance, gae_advantages, ppo_update
+from agents.training.sequences import split_sequences
 
 RECENT_EPISODES = 100  # episodes behind the progress bar's "recent return"
 
@@ -170,10 +175,10 @@ class Trainer:
     @classmethod
     def resume(cls, run_dir: str | Path, overrides: Sequence[str] = ()) -> Trainer:
         """The trainer of ``run_dir`` restored from its newest checkpoint. ``overrides`` (``key=value``) may raise
-        ``run.total_steps``, and the run is then extended from that checkpoint on (:func:`extend_run`), finished or
-        not, and change the settings no record depends on (:func:`agents.config.resume_config`: written to
-        ``config.yaml`` and ``run_info.json`` when training goes on); any other key is a :class:`ConfigError`
-        naming it, raised before anything is touched.
+        ``run.total_steps``, and the run is then extended from that checkpoint on
+        (:func:`agents.training.logs.extend_run`), finished or not, and change the settings no record depends on
+        (:func:`agents.config.resume_config`: written to ``config.yaml`` and ``run_info.json`` when training goes on);
+        any other key is a :class:`ConfigError` naming it, raised before anything is touched.
 
         A damaged checkpoint (truncated or corrupted), or one whose records (``training.csv``,
         ``eval/episodes.csv``) no longer hold what it recorded of them, is passed over for the newest intact one
@@ -230,12 +235,12 @@ class Trainer:
                 self._write_run_files()
             with self._writing(self.run_dir / "training.csv"):
                 self._training_log = TrainingLog(self.run_dir / "training.csv", self.global_step)
-            writer = scalar_writer(_summary_writer(self.run_dir, self.global_step), wandb_writer)
+            writer = scalar_writer(summary_writer(self.run_dir, self.global_step), wandb_writer)
         except BaseException:
             if wandb_writer is not None:
                 wandb_writer.close()
             raise
-        progress = _progress_bar(self.config, self.global_step)
+        progress = progress_bar(self.config, self.global_step)
         try:
             with StopRequests() as stops:
                 while self.update < self.num_updates:
@@ -247,8 +252,8 @@ class Trainer:
                     eval_interval = self.config.eval.interval
                     if eval_interval and (self.update % eval_interval == 0 or last):
                         metrics.update(self.evaluate_now())
-                    _log(writer, metrics, self.global_step)
-                    _show(progress, metrics, self.recent_returns, self.config.batch_size)
+                    log_scalars(writer, metrics, self.global_step)
+                    show_progress(progress, metrics, self.recent_returns, self.config.batch_size)
                     interval = self.config.run.checkpoint_interval
                     saved = None
                     if last or (interval and self.update % interval == 0):
@@ -561,126 +566,6 @@ class Trainer:
 
 
 # ----------------------------------------------------------------------------------------------- helpers
-def extend_run(run_dir: Path, config: Config, total_steps: int, update: int) -> tuple[Config, dict[str, Any]]:
-    """Lengthen the run in ``run_dir`` (saved config ``config``, newest checkpoint at ``update``) to ``total_steps``,
-    which must add at least one update. Writes the new ``config.yaml`` and records the extension in ``run_info.json``
-    (``extended``: when, at which update and step, old and new length; its ``finished`` entry goes, since the run is
-    not any more). Returns the new config and that record."""
-    new = config_from_dict(config_to_dict(config), [f"{LENGTH_KEY}={total_steps}"])
-    batch, old_updates, new_updates = config.batch_size, config.num_updates, new.num_updates
-    if new_updates <= old_updates:
-        raise ConfigError(
-            f"run.total_steps={new.run.total_steps} does not lengthen the run: it is {old_updates} updates of {batch} "
-            f"steps ({old_updates * batch} steps) long; give at least {(old_updates + 1) * batch} to add an update"
-        )
-    record = {
-        "time": now(),
-        "update": update,
-        "step": update * batch,
-        "total_steps": [config.run.total_steps, new.run.total_steps],
-        "num_updates": [old_updates, new_updates],
-        "command": sys.argv,
-    }
-    # config.yaml first: from then on a resume sees the longer run (its checkpoints hold the shorter one), and the
-    # schedules follow from that difference; the run_info record below is the history for readers
-    atomic_write_text(run_dir / "config.yaml", dump_config(new))
-    info_path = run_dir / "run_info.json"
-    info = json.loads(info_path.read_text()) if info_path.is_file() else run_info(config)
-    info.pop("finished", None)
-    info["num_updates"] = new_updates
-    info.setdefault("extended", []).append(record)
-    write_json_atomic(info_path, info, sort_keys=False)
-    return new, record
-
-
-class TrainingLog:
-    """``training.csv``, one row appended and flushed per update, so a running (or killed) run's log is current.
-
-    Opened at ``step`` (0 for a new run, the checkpoint's step on resume), it first rewrites the file atomically with
-    the header and the rows up to ``step`` only: rows a killed run appended after its last checkpoint, and a last line
-    torn by the kill, are dropped, so that after a resume the file holds what an uninterrupted run's holds (the
-    TensorBoard events are truncated the same way, by ``purge_step``)."""
-
-    def __init__(self, path: Path, step: int, columns: tuple[str, ...] = TRAINING_COLUMNS) -> None:
-        self.path = path
-        atomic_write_text(path, training_log_text(path, step, columns))
-        self._handle = open(path, "a", newline="")  # noqa: SIM115 (held open across updates, closed by close())
-        self._writer = csv.DictWriter(self._handle, fieldnames=list(columns), lineterminator="\n")
-
-    def append(self, row: dict[str, Any]) -> None:
-        self._writer.writerow(row)
-        self._handle.flush()  # a reader (or a kill) sees every finished update
-
-    def sync(self) -> None:
-        """Force the rows to disk (at a checkpoint: the log then survives whatever the checkpoint survives)."""
-        os.fsync(self._handle.fileno())
-
-    def close(self) -> None:
-        self._handle.close()
-
-
-def records_past(run_dir: Path, step: int) -> dict[str, int]:
-    """How many rows of ``training.csv`` (a last line cut short by a kill counts as one) and records of
-    ``eval/episodes.csv`` the run holds past ``step``: what resuming from the checkpoint at ``step`` drops."""
-    path = run_dir / "training.csv"
-    text = path.read_text() if path.is_file() else ""
-    torn = int(bool(text) and not text.endswith("\n"))
-    rows = sum(int(row["step"]) > step for row in _complete_rows(path)) + torn
-    records = run_dir / "eval" / "episodes.csv"
-    found = read_records(records, skip_malformed=True) if records.is_file() else []
-    return {"training.csv": rows, "eval/episodes.csv": sum(record["step"] > step for record in found)}
-
-
-def training_log_text(path: Path, step: int, columns: tuple[str, ...] = TRAINING_COLUMNS) -> str:
-    """``training.csv`` as it is up to ``step``: the header and the complete rows of steps up to ``step``."""
-    kept = [row for row in _complete_rows(path) if int(row["step"]) <= step] if step > 0 else []
-    text = io.StringIO()
-    rewrite = csv.DictWriter(text, fieldnames=list(columns), lineterminator="\n", extrasaction="ignore")
-    rewrite.writeheader()
-    rewrite.writerows(kept)
-    return text.getvalue()
-
-
-RECORDED_FILES = ("training.csv", "eval/episodes.csv")  # what a checkpoint records of its run's files
-
-
-def evaluation_records(path: Path, step: int) -> list[dict[str, Any]]:
-    """The in-training evaluation records up to ``step`` (none without the file); a row cut short is left out."""
-    if not path.is_file():
-        return []
-    return [record for record in read_records(path, skip_malformed=True) if record["step"] <= step]
-
-
-def _records_text(path: Path, step: int) -> str:
-    if path.name == "training.csv":
-        return training_log_text(path, step)
-    return records_csv_text(evaluation_records(path, step))
-
-
-def run_records(run_dir: Path, step: int) -> dict[str, dict[str, Any]]:
-    """Size and SHA-256 of what the run's records (:data:`RECORDED_FILES`) hold up to ``step`` as they are read back
-    (what a killed run wrote later does not count; a missing file holds nothing): stored in every checkpoint."""
-    return {name: content_record(_records_text(run_dir / name, step).encode()) for name in RECORDED_FILES}
-
-
-def check_run_records(run_dir: Path, path: Path, state: dict[str, Any]) -> None:
-    """:class:`DamagedCheckpoint` unless the run's records still hold what the checkpoint ``state`` (at ``path``)
-    recorded of them: a truncated or corrupted training.csv or eval/episodes.csv is never continued."""
-    step = state["global_step"]
-    for name, recorded in state.get("records", {}).items():
-        file = run_dir / name
-        try:
-            found = content_record(_records_text(file, step).encode())
-        except (OSError, ValueError, KeyError, TypeError, csv.Error):  # a row garbled beyond parsing
-            found = None
-        if found != recorded:
-            what = "is missing" if not file.is_file() else "does not hold what it recorded of it"
-            raise DamagedCheckpoint(
-                f"{file} {what} (the rows up to step {step}: {recorded['bytes']} bytes, SHA-256 "
-                f"{recorded['sha256'][:12]}...), so {path} cannot be continued: the file was truncated or corrupted"
-            )
-
-
 def non_finite_parameters(model: torch.nn.Module) -> list[str]:
     """The names of the parameters that hold a NaN or an infinity (one device sync)."""
     named = list(model.named_parameters())
@@ -688,90 +573,5 @@ def non_finite_parameters(model: torch.nn.Module) -> list[str]:
     return [name for (name, _), ok in zip(named, finite.tolist(), strict=True) if not ok]
 
 
-def _complete_rows(path: Path) -> list[dict[str, Any]]:
-    """The rows of a CSV file, without a last line that a kill cut short (no newline at its end)."""
-    if not path.is_file():
-        return []
-    text = path.read_text()
-    if text and not text.endswith("\n"):
-        text = text[: text.rfind("\n") + 1]
-    return list(csv.DictReader(io.StringIO(text)))
-
-
 def _is_numeric(value: Any) -> bool:
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-
-
-def _log(writer: Any, metrics: dict[str, float], step: int) -> None:
-    for name, value in metrics.items():
-        if "/" in name and math.isfinite(value):
-            writer.add_scalar(name, value, step)
-
-
-def _show(progress: Any, metrics: dict[str, float], recent_returns: deque, batch_size: int) -> None:
-    if progress is None:
-        return
-    progress.update(batch_size)
-    recent = f"{np.mean(recent_returns):.3f}" if recent_returns else "-"
-    progress.set_postfix(SPS=f"{metrics['charts/SPS']:.0f}", recent_return=recent, refresh=False)
-
-
-def _progress_bar(config: Config, initial: int) -> Any:
-    if not config.run.progress_bar:
-        return None
-    from tqdm import tqdm
-
-    total = config.num_updates * config.batch_size
-    return tqdm(total=total, initial=initial, unit="step", unit_scale=True, dynamic_ncols=True)
-
-
-def _summary_writer(run_dir: Path, step: int) -> Any:
-    from torch.utils.tensorboard import SummaryWriter
-
-    # purge_step drops the events that a killed run logged after its last checkpoint (steps > step), so curves stay
-    # single-valued; the checkpoint's own step was logged before the checkpoint and stays.
-    return SummaryWriter(log_dir=str(run_dir), purge_step=step + 1 if step > 0 else None)
-
-
-# glibc's mallopt parameters (malloc.h) and their values here: blocks up to 32 MiB (the largest mmap threshold glibc
-# accepts) come from the heap, and the heap keeps up to 1 GiB of freed memory instead of returning it to the system.
-_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
-_MMAP_THRESHOLD_BYTES, _TRIM_THRESHOLD_BYTES = 32 << 20, 1 << 30
-
-
-def keep_freed_memory() -> bool:
-    """Let the C allocator reuse freed memory for torch's CPU tensors instead of handing it back to the system.
-
-    torch allocates each minibatch's activations and gradients anew (megabytes each). glibc serves such blocks with
-    fresh mmap pages and unmaps them when freed, so every minibatch pays for tens of thousands of page faults and
-    cold pages (measured: ~45k faults per update of the MortarMayhemB-Grid benchmark; ~25k with this). Returns
-    whether the setting took effect (glibc only; elsewhere nothing changes).
-    """
-    if sys.platform != "linux" or platform.libc_ver()[0] != "glibc":
-        return False
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:
-        return False
-    return bool(
-        libc.mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD_BYTES)
-        and libc.mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD_BYTES)
-    )
-
-
-def run_info(config: Config) -> dict[str, Any]:
-    """Seed, run size and provenance (versions, git revision, machine) of a run (``run_info.json``)."""
-    return {"seed": config.run.seed, "num_updates": config.num_updates, "batch_size": config.batch_size, **provenance()}
-
-
-def default_run_dir(config_path: str | Path, seed: int, root: str | Path = "runs", cell: Sequence[str] = ()) -> Path:
-    """``runs/<config name>/<timestamp>-seed<seed>``; the name is the path below ``configs/`` without suffix. One run
-    of a grid config (``train.py --only``) goes under its ``cell`` (method and task) in between:
-    ``runs/<config name>/<method>/<task>/<timestamp>-seed<seed>``."""
-    path = Path(config_path).resolve()
-    parts = path.with_suffix("").parts
-    name = "/".join(parts[parts.index("configs") + 1 :]) if "configs" in parts[:-1] else path.stem
-    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return Path(root).joinpath(name, *cell, f"{stamp}-seed{seed}")

@@ -15,10 +15,10 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from agents.buffer import RolloutBuffer
 from agents.config import PPOConfig
 from agents.policy.models import ActorCritic, log_probs_and_entropy
-from agents.sequences import Sequences, minibatch_ids, pad_sequences
+from agents.training.buffer import RolloutBuffer
+from agents.training.sequences import Sequences, minibatch_ids, pad_sequences
 
 
 def gae_advantages(

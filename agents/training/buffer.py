@@ -130,7 +130,7 @@ class RolloutBuffer:
         self.episode_step[:, t] = episode_step
 
     def flat(self, tensor: Tensor) -> Tensor:
-        """A (workers * steps, ...) view, indexed by the flat step numbers of :mod:`agents.sequences`."""
+        """A (workers * steps, ...) view, indexed by the flat step numbers of :mod:`agents.training.sequences`."""
         return tensor.reshape(self.size, *tensor.shape[2:])
 
     def gather(self, index: Tensor) -> dict[str, Tensor]:
