@@ -50,17 +50,12 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
 
 from agents.config import NAMED_AXES, ConfigError  # noqa: E402
+from agents.experiments.dry_run import describe
+from agents.experiments.launchers import PREEMPTED, launch_local
+from agents.experiments.panel import evaluate_panel
+from agents.experiments.planning import SweepError, load_panel, select_runs
+from agents.experiments.slurm import launch_slurm, wait_for_jobs  # noqa: E402
 from agents.runtime.preemption import EXIT_PREEMPTED  # noqa: E402
-from agents.slurm import launch_slurm, wait_for_jobs  # noqa: E402
-from agents.sweep import (  # noqa: E402
-    PREEMPTED,
-    SweepError,
-    describe,
-    evaluate_panel,
-    launch_local,
-    load_panel,
-    select_runs,
-)
 
 # --slurm-* options -> grid.slurm keys, and whether the value is text (quoted so YAML keeps it a string)
 SLURM_OPTIONS = {

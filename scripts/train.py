@@ -44,10 +44,10 @@ from agents.config import (  # noqa: E402
     rounding_notice,
     sets_length,
 )
+from agents.experiments.planning import SweepError, SweepRun, load_panel, run_coordinates, select_runs  # noqa: E402
 from agents.policy.checkpoint import checkpoint_damage, checkpoint_update, latest_checkpoint, run_config  # noqa: E402
 from agents.runtime.preemption import EXIT_PREEMPTED, Preempted  # noqa: E402
 from agents.runtime.tracking import TrackingError  # noqa: E402
-from agents.sweep import SweepError, SweepRun, load_panel, run_coordinates, select_runs  # noqa: E402
 from agents.training.logs import default_run_dir  # noqa: E402
 from agents.training.trainer import Trainer, TrainingDiverged, WriteFailed  # noqa: E402
 
@@ -135,8 +135,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _grid_run(config_path: str, overrides: list[str], only: list[str], config: Config) -> SweepRun:
     """The run of the grid config at ``config_path`` (``config``: as loaded) that ``only`` selects, as
-    scripts/sweep.py expands and selects it (:func:`agents.sweep.select_runs`); a ConfigError that says what can be
-    selected when ``only`` is missing or selects several runs, a SweepError when it selects none."""
+    scripts/sweep.py expands and selects it (:func:`agents.experiments.planning.select_runs`); a ConfigError that says
+    what can be selected when ``only`` is missing or selects several runs, a SweepError when it selects none."""
     if not config.grid:
         raise ConfigError(
             f"--only selects a run of a grid config, and {config_path} has no grid: block (train it without --only)"
@@ -158,7 +158,8 @@ def _grid_run(config_path: str, overrides: list[str], only: list[str], config: C
 
 
 def _values(runs: list[SweepRun]) -> dict[str, list[str]]:
-    """Per key --only takes (:func:`agents.sweep.run_coordinates`), the values ``runs`` have, in order."""
+    """Per key --only takes (:func:`agents.experiments.planning.run_coordinates`), the values ``runs`` have, in
+    order."""
     values: dict[str, list[str]] = {}
     for run in runs:
         for key, value in run_coordinates(run).items():

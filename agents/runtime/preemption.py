@@ -5,9 +5,9 @@ or the signal its ``SUBMITIT_PREEMPT_SIGNAL`` names), stop work at its next safe
   checkpoint is written and ``train()`` raises :class:`Preempted`; ``scripts/train.py`` and the sweep's worker then exit
   with :data:`EXIT_PREEMPTED`. If the signal had a Python handler before training began (submitit's, which requeues the
   job), that handler receives it after the checkpoint instead.
-* The sweep's local launcher (:func:`agents.sweep.launch_local`) passes the signal on to every run it trains, starts
-  no new one, waits for their checkpoints and reports them as pre-empted (resumable, not failed); ``scripts/sweep.py``
-  exits with :data:`EXIT_PREEMPTED`.
+* The sweep's local launcher (:func:`agents.experiments.launchers.launch_local`) passes the signal on to every run it
+  trains, starts no new one, waits for their checkpoints and reports them as pre-empted (resumable, not failed);
+  ``scripts/sweep.py`` exits with :data:`EXIT_PREEMPTED`.
 * Evaluation (``scripts/evaluate.py``): the signal ends it with :data:`EXIT_PREEMPTED`, except while its results are
   written (:func:`deferred_signals`): those files are written together, and the signal takes effect right after.
 

@@ -15,10 +15,11 @@ from torch.nn import functional as F
 
 import envs
 from agents.config import config_from_dict, load_config
+from agents.experiments.dry_run import parameter_count
+from agents.experiments.planning import load_panel
 from agents.policy.actor import Actor
 from agents.policy.checkpoint import build_agent, ground_truth_size, load_policy
 from agents.policy.models import ActorCritic
-from agents.sweep import load_panel, parameter_count
 from agents.training.sequences import pad_sequences, split_sequences
 from agents.training.trainer import Trainer
 

@@ -19,7 +19,7 @@ from agents.analysis import scores as scoring
 from agents.analysis.digest import config_digest
 from agents.analysis.results import EPISODE_COLUMNS, Records, ResultsWarning
 from agents.config import MAX_TASK_NAME, NOT_IN_DIGEST, check_name, dump_config, load_config, task_name
-from agents.sweep import load_panel
+from agents.experiments.planning import load_panel
 from agents.training.trainer import Trainer
 from tests.support.synthetic_results import episode_rows, training_rows, write_csv, write_results
 

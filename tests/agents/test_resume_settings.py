@@ -10,8 +10,9 @@ import pytest
 import yaml
 
 from agents.config import Config, config_from_dict, config_to_dict, resume_may_change
+from agents.experiments.planning import SweepError, panel_from_dict
+from agents.experiments.state import PARTIAL, prepare_run, run_status
 from agents.policy.checkpoint import check_checkpoint_config
-from agents.sweep import PARTIAL, SweepError, panel_from_dict, prepare_run, run_status
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},

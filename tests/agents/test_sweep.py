@@ -10,21 +10,9 @@ from pathlib import Path
 import pytest
 
 from agents.config import ConfigError, config_from_dict, expand_grid, slurm_minutes
-from agents.sweep import (
-    FINISHED,
-    NEW,
-    PARTIAL,
-    RUNNING,
-    SweepError,
-    describe,
-    disk_estimate,
-    load_panel,
-    panel_from_dict,
-    prepare_run,
-    run_lock,
-    run_status,
-    statuses,
-)
+from agents.experiments.dry_run import describe, disk_estimate
+from agents.experiments.planning import SweepError, load_panel, panel_from_dict
+from agents.experiments.state import FINISHED, NEW, PARTIAL, RUNNING, prepare_run, run_lock, run_status, statuses
 from scripts import sweep as sweep_script
 
 PAPER = Path(__file__).resolve().parents[2] / "configs" / "paper"
@@ -234,7 +222,7 @@ def test_plain_axes_never_pool_different_experiments_in_one_cell() -> None:
     """The records' (method, task) cell of a sweep run holds the runs of its seeds only: an env.* axis extends the
     task's name, any other plain axis the method's, so the panel's results never refuse (or pool) them."""
     from agents.analysis.digest import config_digest
-    from agents.sweep import run_coordinates
+    from agents.experiments.planning import run_coordinates
 
     grid = {"method": {"gru": {}}, "task": {"pom": {}}, "run.seed": [0, 1], "ppo.gamma": [0.9, 0.99]}
     panel = panel_from_dict({**TINY, "grid": {**grid, "env.options.delay": [2, 4]}}, name="p")

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from agents.sweep import SweepError, describe, panel_from_dict, parse_selection, select_runs
+from agents.experiments.dry_run import describe
+from agents.experiments.planning import SweepError, panel_from_dict, parse_selection, select_runs
 
 TINY = {
     "env": {"id": "ProofOfMemory-v0"},

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from agents.sweep import FINISHED, NEW, load_panel, statuses
+from agents.experiments.planning import load_panel
+from agents.experiments.state import FINISHED, NEW, statuses
 from scripts import sweep as sweep_script
 
 TINY = {

@@ -16,9 +16,11 @@ from pathlib import Path
 import pytest
 import yaml
 
+from agents.experiments.launchers import train_run
+from agents.experiments.planning import load_panel
+from agents.experiments.state import FINISHED, prepare_run, run_lock, run_status
 from agents.policy.checkpoint import checkpoint_update, latest_checkpoint
 from agents.runtime.preemption import EXIT_PREEMPTED
-from agents.sweep import FINISHED, load_panel, prepare_run, run_lock, run_status, train_run
 from scripts import sweep as sweep_script
 from tests.support.tiny_run import tiny_run, with_run
 

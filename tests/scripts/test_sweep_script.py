@@ -19,9 +19,10 @@ import torch
 import yaml
 
 from agents.evaluation.records import read_records
+from agents.experiments.planning import load_panel
+from agents.experiments.slurm import wait_for_jobs
+from agents.experiments.state import FINISHED, run_status
 from agents.policy.checkpoint import checkpoint_update, latest_checkpoint
-from agents.slurm import wait_for_jobs
-from agents.sweep import FINISHED, load_panel, run_status
 from scripts import sweep as sweep_script
 from tests.support.tiny_run import tiny_run, with_run
 
@@ -179,7 +180,7 @@ def _task_processes(controller: int) -> list[int]:
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="finds the job's process through /proc")
 def test_slurm_launcher_through_submitit_requeues_and_resumes(tmp_path: Path) -> None:
     pytest.importorskip("submitit")
-    from agents.slurm import launch_slurm
+    from agents.experiments.slurm import launch_slurm
 
     grid = {"method": {"gru": {}}, "run.seed": [0], "slurm": {"time": "5", "cpus_per_job": 1}}
     config = _write(tmp_path / "cluster.yaml", grid, with_run(TINY, total_steps=24 * 64))

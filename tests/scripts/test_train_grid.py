@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from agents.config import load_config
-from agents.sweep import load_panel, select_runs
+from agents.experiments.planning import load_panel, select_runs
 from scripts import train as train_script
 
 TINY = {

@@ -1,10 +1,10 @@
 """The SLURM launcher of sweeps: every new or partial run of a panel submitted as one job of a job array through
 submitit, requeued when it is pre-empted or reaches its time limit, and resumed from its newest checkpoint.
 
-A job runs :func:`agents.sweep.train_run` on one prepared run directory, exactly as the local launcher's worker
-does; the panel's ``grid.slurm`` block (:class:`agents.config.SlurmConfig`) holds the cluster settings. submitit's
-job files and the jobs' logs go to ``<root>/<panel>/slurm/``, with ``submissions.jsonl`` saying which job trained
-which run. The grids, run states and the local launcher are in :mod:`agents.sweep`.
+A job runs :func:`agents.experiments.launchers.train_run` on one prepared run directory, exactly as the local launcher's
+worker does; the panel's ``grid.slurm`` block (:class:`agents.config.SlurmConfig`) holds the cluster settings.
+submitit's job files and the jobs' logs go to ``<root>/<panel>/slurm/``, with ``submissions.jsonl`` saying which job
+trained which run. The plan, run states and the local launcher are in :mod:`agents.experiments`.
 """
 
 from __future__ import annotations
@@ -18,20 +18,10 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from agents.experiments.launchers import Outcome, train_run, worker_environment
+from agents.experiments.planning import Echo, Panel, SweepError, SweepRun
+from agents.experiments.state import NEW, PARTIAL, prepare_run, statuses
 from agents.runtime.io import now
-from agents.sweep import (
-    NEW,
-    PARTIAL,
-    Echo,
-    Outcome,
-    Panel,
-    SweepError,
-    SweepRun,
-    prepare_run,
-    statuses,
-    train_run,
-    worker_environment,
-)
 
 
 class RunJob:
