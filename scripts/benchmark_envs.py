@@ -36,16 +36,15 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+import numpy as np
+
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance
+from envs import make_core
+from scripts.reference import REFERENCE_IDS  # (the ids measured: those memory-gym has)
+from scripts.reference.protocol import time_constant_action_episodes
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
-
-from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
-from envs import make_core  # noqa: E402
-from scripts.reference import REFERENCE_IDS  # noqa: E402  (the ids measured: those memory-gym has)
-from scripts.reference.protocol import time_constant_action_episodes  # noqa: E402
 
 SLOT_COUNTS = (16, 64)
 DEFAULT_OUT = SCRATCH / "benchmarks" / "envs.json"

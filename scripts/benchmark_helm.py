@@ -16,18 +16,16 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import sys
 import time
 from collections.abc import Iterable
 from pathlib import Path
 
+import torch
+
+from agents.policy.helm import HelmBranch
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance
+
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))  # run from a checkout without installing
-
-import torch  # noqa: E402
-
-from agents.policy.helm import HelmBranch  # noqa: E402
-from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
 
 # name: (layers, width, heads, vocab, mem_len)
 SIZES = {

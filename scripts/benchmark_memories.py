@@ -24,13 +24,11 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
+import torch
 
-import torch  # noqa: E402
-
-from agents.config import ModelConfig  # noqa: E402
-from agents.memory import build_memory  # noqa: E402
-from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, atomic_write_bytes, json_table, provenance  # noqa: E402
+from agents.config import ModelConfig
+from agents.memory import build_memory
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, atomic_write_bytes, json_table, provenance
 
 MEMORIES = ("gru", "lru", "ffm", "mamba", "mamba2")
 LENGTHS = (64, 128, 256, 512, 1024, 2048, 4096)

@@ -56,17 +56,15 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # run from a checkout without installing
+import gymnasium as gym
+import numpy as np
 
-import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
-
-from agents.config import Config, load_config  # noqa: E402
-from agents.policy.models import log_probs_and_entropy  # noqa: E402
-from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance  # noqa: E402
-from agents.training.ppo import filled_index  # noqa: E402
-from agents.training.sequences import minibatch_ids, pad_sequences, split_sequences  # noqa: E402
-from agents.training.trainer import Trainer  # noqa: E402
+from agents.config import Config, load_config
+from agents.policy.models import log_probs_and_entropy
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance
+from agents.training.ppo import filled_index
+from agents.training.sequences import minibatch_ids, pad_sequences, split_sequences
+from agents.training.trainer import Trainer
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"

@@ -17,12 +17,11 @@ import json
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from agents.analysis.scores import separation
+from agents.config import read_config_file
+from scripts import sweep as sweep_script
 
-from agents.analysis.scores import separation  # noqa: E402
-from agents.config import read_config_file  # noqa: E402
-from scripts import sweep as sweep_script  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def main(argv: list[str] | None = None) -> int:

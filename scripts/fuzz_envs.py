@@ -24,10 +24,9 @@ import time
 from importlib import metadata
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument
 
-from agents.runtime.io import SCRATCH, ResultFile, add_out_argument  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 DEFAULT_OUT = SCRATCH / "reliability.json"
 SECTION = "fuzzed_environments"

@@ -11,16 +11,14 @@ where ``--out`` names it, and a report of some of the ids never replaces one of 
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table
+from scripts.reference import REFERENCE_IDS
+from scripts.reference.parity import replay, replay_batched
 
-from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table  # noqa: E402
-from scripts.reference import REFERENCE_IDS  # noqa: E402
-from scripts.reference.parity import replay, replay_batched  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 DEFAULT_OUT = SCRATCH / "parity.json"
 

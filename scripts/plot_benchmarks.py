@@ -15,15 +15,13 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, repo_relative
+from scripts.benchmark_envs import DEFAULT_OUT as DEFAULT_JSON
+from scripts.benchmark_envs import report_partial
 
-from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, repo_relative  # noqa: E402
-from scripts.benchmark_envs import DEFAULT_OUT as DEFAULT_JSON  # noqa: E402
-from scripts.benchmark_envs import report_partial  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 DEFAULT_OUT = SCRATCH / "benchmarks" / "envs.png"
 MARKER = "Memory Gym benchmark"  # PNG text chunk: "full", or "partial: <why>"

@@ -13,13 +13,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-
-from scripts.reference import MP_PATHS_FILE, REFERENCE_IDS, TRACES_DIR  # noqa: E402
-from scripts.reference.venv import (  # noqa: E402
+from scripts.reference import MP_PATHS_FILE, REFERENCE_IDS, TRACES_DIR
+from scripts.reference.venv import (
     ensure_reference_venv,
     record_mp_paths,
     record_traces,
