@@ -19,7 +19,7 @@ from agents.evaluation.records import read_records
 from agents.evaluation.runs import evaluate_runs, unique_run_names
 from agents.training.trainer import Trainer
 from scripts import evaluate as evaluate_script
-from tests.agents.test_evaluation import TINY
+from tests.agents.evaluation.test_evaluation import TINY
 
 QUIET = ["--no-progress"]
 

@@ -23,7 +23,7 @@ from agents.policy.models import ActorCritic
 from agents.training.sequences import pad_sequences, split_sequences
 from agents.training.trainer import Trainer
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 ENDLESS = ["Endless-MortarMayhem-v0", "Endless-MysteryPath-v0", "Endless-SearingSpotlights-v0"]
 
 

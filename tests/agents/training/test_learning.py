@@ -14,7 +14,7 @@ import pytest
 from agents.config import load_config
 from agents.training.trainer import Trainer
 
-CONFIGS = Path(__file__).resolve().parents[2] / "configs" / "proof_of_memory"
+CONFIGS = Path(__file__).resolve().parents[3] / "configs" / "proof_of_memory"
 
 
 def _success(history: list[dict[str, float]], last: int) -> float:

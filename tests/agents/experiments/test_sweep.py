@@ -15,7 +15,7 @@ from agents.experiments.planning import SweepError, load_panel, panel_from_dict
 from agents.experiments.state import FINISHED, NEW, PARTIAL, RUNNING, prepare_run, run_lock, run_status, statuses
 from scripts import sweep as sweep_script
 
-PAPER = Path(__file__).resolve().parents[2] / "configs" / "paper"
+PAPER = Path(__file__).resolve().parents[3] / "configs" / "paper"
 FIGURES = {"fig4": 75, "fig5": 20 + 25, "fig6": 20}
 TINY = {
     "env": {"id": "ProofOfMemory-v0", "options": {"delay": 3}},

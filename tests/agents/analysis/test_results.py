@@ -23,7 +23,7 @@ from agents.experiments.planning import load_panel
 from agents.training.trainer import Trainer
 from tests.support.synthetic_results import episode_rows, training_rows, write_csv, write_results
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture

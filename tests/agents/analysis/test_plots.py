@@ -125,7 +125,7 @@ def test_save_figure_writes_png_and_pdf_atomically(loaded: results.Results, tmp_
 
 # --------------------------------------------------- C8: ranges, chance lines, legends, readable labels and titles
 def test_every_method_of_the_configs_has_a_readable_label() -> None:
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]
     methods = set()
     for path in sorted((root / "configs").rglob("*.yaml")):
         raw = read_config_file(path)
@@ -250,7 +250,7 @@ def test_methods_without_a_shared_step_leave_the_legend_and_are_named(tmp_path: 
 
 def test_plot_results_finds_the_options_of_older_records_in_the_saved_configs(tmp_path: Path) -> None:
     """The committed CPU panel predates the env_options column: its titles and chance line come from config.yaml."""
-    committed = Path(__file__).resolve().parents[2] / "results" / "cpu" / "mm_grid_1" / "results"
+    committed = Path(__file__).resolve().parents[3] / "results" / "cpu" / "mm_grid_1" / "results"
     loaded = results.read_results(committed)
     options = results.task_options(loaded.episodes, [committed])
     figure = plots.final_figure(loaded.episodes, reps=50, options=options)

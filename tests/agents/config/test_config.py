@@ -19,7 +19,7 @@ from agents.config import (
     read_config_file,
 )
 
-CONFIG_ROOT = Path(__file__).resolve().parents[2] / "configs"
+CONFIG_ROOT = Path(__file__).resolve().parents[3] / "configs"
 CONFIGS = sorted(CONFIG_ROOT.rglob("*.yaml"))
 
 
@@ -281,7 +281,7 @@ def test_shipped_configs_load(path: Path) -> None:
 
 
 def test_mortar_mayhem_b_grid_configs_are_table_6() -> None:
-    root = Path(__file__).resolve().parents[2] / "configs" / "mortar_mayhem_b_grid"
+    root = Path(__file__).resolve().parents[3] / "configs" / "mortar_mayhem_b_grid"
     for name, memory in (("gru", "gru"), ("ppo", "none")):
         raw = yaml.safe_load((root / f"{name}.yaml").read_text())
         assert raw["env"]["id"] == "MortarMayhemB-Grid-v0"

@@ -35,7 +35,7 @@ from scripts import train as train_script
 from tests.support.interrupt import kill_after
 from tests.support.tiny_run import tiny_run, with_run
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 TINY = tiny_run(
     {"epochs": 2, "minibatches": 2},
     {"total_steps": 6 * 64, "seed": 3, "torch_threads": 1, "checkpoint_interval": 2},  # 6 updates
