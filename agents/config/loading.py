@@ -48,7 +48,7 @@ def config_from_dict(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> C
     """Build a validated :class:`Config` from nested dicts plus ``key=value`` overrides.
 
     With a ``grid`` block the result is the base of the grid (base file plus overrides, each block validated), and
-    every point of the grid is expanded and validated as a whole config (:func:`expand_grid`)."""
+    every point of the grid is expanded and validated as a whole config (:func:`~agents.config.grids.expand_grid`)."""
     overrides = list(overrides)
     merged = deep_copy(raw)
     for item in overrides:

@@ -367,8 +367,8 @@ class SlurmConfig(Settings):
 
 @dataclass
 class Config(Settings):
-    """A whole training run. ``grid`` (see "Grids" in the module docstring) is expanded by :func:`expand_grid` for
-    ``scripts/sweep.py``; a config that has one is not a single run."""
+    """A whole training run. ``grid`` (its format: :mod:`agents.config.grids`) is expanded by
+    :func:`~agents.config.grids.expand_grid` for ``scripts/sweep.py``; a config that has one is not a single run."""
 
     env: EnvConfig = param(EnvConfig(), "environment")
     model: ModelConfig = param(ModelConfig(), "actor-critic model")
