@@ -304,3 +304,12 @@ def test_the_observation_decoder_mirrors_the_encoder_and_its_loss_reaches_the_me
         model.memory.rnn.weight_ih_l0.grad.abs().sum() > 0 and model.image_encoder.convs[0].weight.grad.abs().sum() > 0
     )
     assert model.policy_heads[0].weight.grad is None  # only the reconstruction loss was taken
+
+
+def test_the_configs_encoder_choices_are_the_image_encoders_and_the_mlp() -> None:
+    """model.encoder's choices live in the config (agents.config.ENCODERS, which validation reads without importing
+    the policy); the image encoders the model builds must be exactly those choices but the MLP."""
+    from agents.config import ENCODERS
+    from agents.policy.models import IMAGE_ENCODERS
+
+    assert set(ENCODERS) == {*IMAGE_ENCODERS, "mlp"}
