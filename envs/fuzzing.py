@@ -69,8 +69,8 @@ SCALE = SCALES.get(PROFILE, SCALES["ci"])
 CASES: Counter[tuple[str, str]] = Counter()
 
 # ------------------------------------------------------------------------------------------- documented info keys
-# docs/environments.md and docs/environment_notes.md: the keys of the final info of each id (memory-gym's, plus the keys the core
-# lists in ``added_info_keys``), and ``ground_truth`` on every step and reset of the endless ids.
+# docs/environments.md and docs/environment_notes.md: the keys of the final info of each id (memory-gym's, plus the
+# keys the core lists in ``added_info_keys``), and ``ground_truth`` on every step and reset of the endless ids.
 _MM = {"reward", "length", "success", "commands_completed", "checks_passed", "command_count"}
 FINAL_INFO_KEYS: dict[str, set[str]] = {
     "ProofOfMemory-v0": {"reward", "length", "success"},

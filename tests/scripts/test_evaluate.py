@@ -26,15 +26,17 @@ QUIET = ["--no-progress"]
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """A GRU-PPO and a memory-less PPO run (checkpoints at steps 64 and 128), and the GRU run copied to two
-    directories both named seed1."""
+    """A GRU-PPO and a memory-less PPO run (checkpoints at steps 64 and 128), and two GRU runs (the first copied,
+    and one of another seed) in two directories both named seed1."""
     root = tmp_path_factory.mktemp("runs")
     ppo = copy.deepcopy(TINY)
     ppo["model"] = {"memory": "none", "hidden_size": 8}
+    other_seed = copy.deepcopy(TINY)
+    other_seed["run"]["seed"] = TINY["run"]["seed"] + 1
     Trainer(config_from_dict(TINY), root / "gru" / "seed1").train()
     Trainer(config_from_dict(ppo), root / "ppo" / "seed1").train()
-    for parent in ("a", "b"):
-        shutil.copytree(root / "gru" / "seed1", root / parent / "seed1")
+    shutil.copytree(root / "gru" / "seed1", root / "a" / "seed1")
+    Trainer(config_from_dict(other_seed), root / "b" / "seed1").train()  # the same run twice would be refused
     return {name: root / name / "seed1" for name in ("gru", "ppo", "a", "b")}
 
 
