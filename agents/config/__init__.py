@@ -16,15 +16,16 @@ Example::
 Where what lives (this face re-exports the public names, so ``from agents.config import X`` is enough):
 
 * :mod:`agents.config.schema`: the blocks (:class:`Config` and its parts), each checking itself;
-* :mod:`agents.config.memories`: the settings blocks of the built-in memories (``model.trxl``, ``model.lru``, ...);
 * :mod:`agents.config.tasks`: an environment's resolved reset options and the task names made of them;
 * :mod:`agents.config.building`: strict building of blocks from nested dicts, dotted keys, overrides, and back;
 * :mod:`agents.config.grids`: grid expansion (axes, bundles, points; the format is in its docstring);
 * :mod:`agents.config.loading`: YAML files and dicts in, a validated config out; ``config.yaml`` text;
 * :mod:`agents.config.resume`: the one table of what a resume may change and what the records do not depend on.
 
-The config sits on the memories' floor: it reads the memory registry (:mod:`agents.memory`) to check
-``model.memory`` and the small shared modules (:mod:`agents.settings`), and nothing above it.
+The config sits on the memories' floor: it reads the memory registry (:mod:`agents.memory`), for ``model.memory``'s
+choices and the memories' settings blocks (``model.trxl``, ``model.lru``, ...: each memory's file defines its own),
+and the small shared modules (:mod:`agents.settings`), and nothing above it. Loading it imports the memories (and
+torch).
 """
 
 from __future__ import annotations
@@ -41,7 +42,6 @@ from agents.config.grids import (
     grid_slurm,
 )
 from agents.config.loading import config_from_dict, dump_config, load_config, read_config_file
-from agents.config.memories import FfmConfig, LruConfig, Mamba2Config, MambaConfig, TrxlConfig
 from agents.config.resume import (
     CHANGE_RECORDS,
     LENGTH_KEY,
@@ -101,12 +101,8 @@ __all__ = [
     "ConfigError",
     "EnvConfig",
     "EvalConfig",
-    "FfmConfig",
     "GridPoint",
     "HelmConfig",
-    "LruConfig",
-    "Mamba2Config",
-    "MambaConfig",
     "MetricConfig",
     "ModelConfig",
     "PPOConfig",
@@ -114,7 +110,6 @@ __all__ = [
     "Schedule",
     "Setting",
     "SlurmConfig",
-    "TrxlConfig",
     "WandbConfig",
     "check_cross_fields",
     "check_disjoint_seeds",

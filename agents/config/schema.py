@@ -1,6 +1,10 @@
 """The config's schema: one dataclass per block (``env``, ``model``, ``ppo``, ``run``, ``eval``, their sub-blocks, and
 ``grid.slurm``), every field documented with its default and bounds (:func:`agents.settings.param`), every block
 checking what its field types cannot express (``check``), and :class:`Config`, a whole run.
+
+The memories' blocks (``model.trxl``, ``model.lru``, ...) are not written here: each memory's file brings its
+settings dataclass in its spec, and :class:`ModelConfig` gets one field per memory with settings from the registry
+(:data:`agents.memory.MEMORY_SPECS`, in its order), as it gets ``model.memory``'s choices.
 """
 
 from __future__ import annotations
@@ -13,8 +17,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import envs
-from agents.config.memories import FfmConfig, LruConfig, Mamba2Config, MambaConfig, TrxlConfig
 from agents.config.tasks import task_name
+from agents.memory import MEMORY_MODULES, MEMORY_SPECS, memory_class, memory_spec
 from agents.settings import ConfigError, Settings, check_choice, param
 
 NO_LM = "none"
@@ -161,20 +165,34 @@ ENCODERS: dict[str, str] = {
 }
 
 
+def with_memory_blocks(cls: type) -> type:
+    """``cls`` (a block, before ``@dataclass``) with a field per registered memory that has settings: ``<name>``, its
+    settings dataclass with its defaults, after the fields written in the class, in the registry's order."""
+    for spec in MEMORY_SPECS.values():
+        if spec.settings is None:
+            continue
+        if spec.name in cls.__annotations__:  # a memory named like a field of the block (helm, encoder...)
+            raise TypeError(f"memory {spec.name!r} ({spec.module}): its settings block would replace model.{spec.name}")
+        cls.__annotations__[spec.name] = spec.settings
+        doc = f"settings of the memory {spec.name} (used with memory: {spec.name}; {spec.module})"
+        setattr(cls, spec.name, param(spec.settings(), doc))
+    return cls
+
+
 @dataclass
+@with_memory_blocks
 class ModelConfig(Settings):
-    """The actor-critic: encoders -> memory -> body -> separate policy and value streams."""
+    """The actor-critic: encoders -> memory -> body -> separate policy and value streams. A memory with settings has
+    its block here, ``model.<name>`` (added from the registry, :func:`with_memory_blocks`)."""
 
     encoder: str = param("nature_cnn", "observation encoder (agents.config.ENCODERS): nature_cnn (images) or mlp")
     memory: str = param(
         "gru",
-        "memory module (agents.memory.MEMORY_MODULES): none, gru, lstm, trxl, lru, ffm, mamba, mamba2, or a class of "
-        "your own by import path, 'package.module:ClassName' (docs/memory.md)",
+        f"memory module (agents.memory.MEMORY_MODULES): {', '.join(MEMORY_MODULES)}, or a class of your own by "
+        "import path, 'package.module:ClassName' (docs/memory.md)",
     )
-    memory_size: int = param(
-        512, "hidden units of the recurrent layer (the width of lru, ffm, mamba and mamba2)", low=1
-    )
-    memory_layers: int = param(1, "stacked recurrent layers (blocks of lru, ffm, mamba and mamba2)", low=1)
+    memory_size: int = param(512, "width of the memory: a recurrent layer's hidden units, a block's width", low=1)
+    memory_layers: int = param(1, "stacked layers (or blocks) of the memory", low=1)
     memory_options: dict[str, Any] = param(
         {}, "keyword arguments of a memory given by import path (its own hyperparameters)"
     )
@@ -192,15 +210,9 @@ class ModelConfig(Settings):
     )
     grayscale: bool = param(False, "turn images into one luma channel (ITU-R 601) before stacking")
     helm: HelmConfig = param(HelmConfig(), "the HELM branch (off unless helm.lm is set)")
-    trxl: TrxlConfig = param(TrxlConfig(), "the Transformer-XL memory (used with memory: trxl)")
-    lru: LruConfig = param(LruConfig(), "the Linear Recurrent Unit (used with memory: lru)")
-    ffm: FfmConfig = param(FfmConfig(), "Fast and Forgetful Memory (used with memory: ffm)")
-    mamba: MambaConfig = param(MambaConfig(), "the selective state-space memory (used with memory: mamba)")
-    mamba2: Mamba2Config = param(Mamba2Config(), "the state-space memory with a decay per head (memory: mamba2)")
+    # model.<memory>: the settings blocks of the registered memories follow here (with_memory_blocks)
 
     def check(self, prefix: str) -> None:
-        from agents.memory import MEMORY_MODULES, memory_class  # the registry the model is built from
-
         check_choice(f"{prefix}.encoder", self.encoder, tuple(ENCODERS))
         if not self.mlp_sizes or any(size < 1 for size in self.mlp_sizes):
             raise ConfigError(
@@ -213,12 +225,9 @@ class ModelConfig(Settings):
                 raise ConfigError(f"{prefix}.memory={self.memory!r}: {err}") from err
         else:
             check_choice(f"{prefix}.memory", self.memory, tuple(MEMORY_MODULES))
-        inner = self.mamba2.expand * self.memory_size  # Mamba-2's heads split its inner width
-        if self.memory == "mamba2" and inner % self.mamba2.head_dim:
-            raise ConfigError(
-                f"{prefix}.mamba2.head_dim={self.mamba2.head_dim} is invalid: expected a divisor of the inner width "
-                f"{prefix}.mamba2.expand x {prefix}.memory_size = {inner}"
-            )
+            spec = MEMORY_SPECS[self.memory]
+            if spec.check is not None:  # what spans this block and the memory's own (e.g. widths that must divide)
+                spec.check(self, prefix)
         if self.memory_options and ":" not in self.memory:
             raise ConfigError(
                 f"{prefix}.memory_options={self.memory_options!r} is only for a memory given by import path; "
@@ -394,7 +403,8 @@ class Config(Settings):
             return self.run.method
         model = self.model
         memory = model.memory.rpartition(":")[2]  # an import path is named by its class
-        parts = [] if memory == "none" else [memory]
+        spec = memory_spec(model.memory)
+        parts = [] if spec is not None and spec.stateless else [memory]
         if model.frame_stack > 1:
             parts.append(f"stack{model.frame_stack}")
         if model.helm.enabled:
@@ -435,10 +445,11 @@ def check_cross_fields(config: Config) -> None:
             f"run.total_steps={config.run.total_steps} is smaller than one batch "
             f"(run.workers x run.worker_steps = {config.batch_size}): expected at least {config.batch_size}"
         )
-    if config.model.memory == "none" and config.ppo.sequence_length not in ("max", 1):
+    spec = memory_spec(config.model.memory)
+    if spec is not None and spec.stateless and config.ppo.sequence_length not in ("max", 1):
         raise ConfigError(
             f"ppo.sequence_length={config.ppo.sequence_length!r} needs a memory module; "
-            "with model.memory=none use 'max' or 1 (every step is its own sequence)"
+            f"with model.memory={config.model.memory} use 'max' or 1 (every step is its own sequence)"
         )
     check_disjoint_seeds(config.env.train_seeds, config.eval_seeds)
 

@@ -2,7 +2,7 @@
 
 A memory sits between the encoders and the body of :class:`agents.policy.models.ActorCritic`. The actor, the rollout
 buffer, the sequence batching and the PPO update only speak this interface (:class:`agents.memory.base.Memory`), so a
-new memory is one new file here and one registry entry:
+new memory is one new file here (see "The registry" below):
 
 * ``output_size``: width of its output.
 * **State** (``state_shape``, ``state_dtype``): what a slot carries from one decision to the next, one tensor per
@@ -23,45 +23,87 @@ new memory is one new file here and one registry entry:
 * ``sequences(features, records, mask, episode_step)``: the training pass over the real steps of S padded sequences.
 * ``stateless``: no memory at all (every step is a sequence of its own).
 
+The registry. Every module of this package is imported when the package is (:func:`pkgutil.iter_modules` over its
+directory, file names starting with ``_`` left out), and each memory file exports its specs as ``MEMORIES = (
+MemorySpec(...), ...)`` (:class:`agents.memory.base.MemorySpec`): its name (``model.memory``), its label and colour
+in figures, its builder, its settings dataclass (the block ``model.<name>``, with defaults, ranges and its own
+checks), a check spanning the model block and its own, the method names of its variants. :data:`MEMORY_SPECS` holds
+them in a fixed order, by each spec's ``order`` (the built-ins: none 0, gru 10, lstm 20, trxl 30, lru 40, ffm 50,
+mamba 60, mamba2 70; a spec that sets none comes after them), then file name, then place in its file. The config
+(``model.memory``'s choices, the ``model.<name>`` blocks), the figures (labels, colours, legend order) and the
+benchmark scripts (their method lists) read it and name no memory. So adding a built-in memory is one new file here,
+and removing a memory's file leaves the package and every other memory working (its name is then refused with the
+list of valid ones). Shared machinery exports no spec: :mod:`agents.memory.base` (the interface, the spec),
+:mod:`agents.memory.scan` (the parallel scan), :mod:`agents.memory.ssm` (the state-space memories' convolution),
+:mod:`agents.memory.packed_gru` (the GRU's CPU recurrence). The memory files' public names (their ``__all__``: the
+memory classes and settings dataclasses) are this package's too (``agents.memory.RecurrentMemory``).
+
 Families: :mod:`agents.memory.recurrent` (``none``, ``gru``, ``lstm``), :mod:`agents.memory.transformer` (``trxl``),
 and the linear recurrences on the shared parallel scan (:mod:`agents.memory.scan`): :mod:`agents.memory.lru`
 (``lru``), :mod:`agents.memory.ffm` (``ffm``), :mod:`agents.memory.mamba` (``mamba``), :mod:`agents.memory.mamba2`
 (``mamba2``: one decay per head, so its training pass is matrix products over chunks and the shared scan runs over
 the chunk boundaries only).
 
-A memory of the user's own needs no edit here: ``model.memory: "package.module:ClassName"`` imports a
+A memory of the user's own needs no file here: ``model.memory: "package.module:ClassName"`` imports a
 :class:`Memory` subclass, built as ``ClassName(input_size, model_config, **model.memory_options)``
-(:func:`build_memory`; a walk-through is in docs/memory.md).
+(:func:`build_memory`; both ways are walked through in docs/memory.md).
 """
 
 from __future__ import annotations
 
 import importlib
+import pkgutil
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
-from agents.memory.base import Memory
-from agents.memory.ffm import FFM
-from agents.memory.lru import LRU
-from agents.memory.mamba import Mamba
-from agents.memory.mamba2 import Mamba2
-from agents.memory.recurrent import NoMemory, RecurrentMemory
-from agents.memory.transformer import TransformerXL
+from agents.memory.base import Memory, MemorySpec
 
 if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
     from agents.config import ModelConfig
 
-# The one registry of memory modules (the config validation reads its keys): name -> builder(config, input size).
+
+def _memory_files() -> list[ModuleType]:
+    """Every module of this package, imported, in file-name order (a broken memory file fails loudly here)."""
+    names = sorted(info.name for info in pkgutil.iter_modules(__path__) if not info.name.startswith("_"))
+    return [importlib.import_module(f"{__name__}.{name}") for name in names]
+
+
+def _collect(modules: list[ModuleType]) -> dict[str, MemorySpec]:
+    """The specs the modules export (``MEMORIES``), by order, file name and place in the file; a name (or a variant's
+    method name) given twice is an error naming both files."""
+    found: list[tuple[int, str, int, MemorySpec]] = []
+    for module in modules:
+        exported = getattr(module, "MEMORIES", ())
+        for place, spec in enumerate(exported):
+            if not isinstance(spec, MemorySpec):
+                raise TypeError(f"{module.__name__}.MEMORIES[{place}] is {spec!r}, not an agents.memory.MemorySpec")
+            found.append((spec.order, module.__name__, place, spec))
+    specs: dict[str, MemorySpec] = {}
+    owners: dict[str, str] = {}  # memory and variant names -> the module that exports them
+    for _, module_name, _, spec in sorted(found, key=lambda entry: entry[:3]):
+        for name in (spec.name, *spec.variants):
+            if name in owners:
+                raise ValueError(f"memory name {name!r} is exported twice: by {owners[name]} and by {module_name}")
+            owners[name] = module_name
+        specs[spec.name] = spec
+    return specs
+
+
+_MODULES = _memory_files()
+
+# The one registry: name -> spec, in the registry's order (the config validation reads its keys).
+MEMORY_SPECS: dict[str, MemorySpec] = _collect(_MODULES)
+
+# name -> builder(model config, input size), as the model builds its memory.
 MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], Memory]] = {
-    "none": lambda config, input_size: NoMemory(input_size),
-    "gru": lambda config, input_size: RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers),
-    "lstm": lambda config, input_size: RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers),
-    "trxl": lambda config, input_size: TransformerXL(config.trxl, input_size),
-    "lru": lambda config, input_size: LRU(config.lru, input_size, config.memory_size, config.memory_layers),
-    "ffm": lambda config, input_size: FFM(config.ffm, input_size, config.memory_size, config.memory_layers),
-    "mamba": lambda config, input_size: Mamba(config.mamba, input_size, config.memory_size, config.memory_layers),
-    "mamba2": lambda config, input_size: Mamba2(config.mamba2, input_size, config.memory_size, config.memory_layers),
+    name: spec.builder for name, spec in MEMORY_SPECS.items()
 }
+
+
+def memory_spec(name: str) -> MemorySpec | None:
+    """The spec of a registered memory, None for any other name (an import path, a name no file exports)."""
+    return MEMORY_SPECS.get(name)
 
 
 def memory_class(path: str) -> type[Memory]:
@@ -89,19 +131,31 @@ def build_memory(config: ModelConfig, input_size: int) -> Memory:
     """The memory of a model config: a registered name, or a class by import path."""
     if ":" in config.memory:
         return memory_class(config.memory)(input_size, config, **config.memory_options)
+    if config.memory not in MEMORY_MODULES:  # a config validated elsewhere (the config refuses it when it loads)
+        raise ValueError(f"model.memory={config.memory!r} is not a memory; valid memories: {', '.join(MEMORY_MODULES)}")
     return MEMORY_MODULES[config.memory](config, input_size)
 
 
+# The memory files' public names (their __all__), so that ``from agents.memory import RecurrentMemory`` works
+# whichever files there are.
+_EXPORTED: dict[str, Any] = {
+    name: getattr(module, name) for module in _MODULES for name in getattr(module, "__all__", ())
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTED:
+        return _EXPORTED[name]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
-    "FFM",
-    "LRU",
     "MEMORY_MODULES",
-    "Mamba",
-    "Mamba2",
+    "MEMORY_SPECS",
     "Memory",
-    "NoMemory",
-    "RecurrentMemory",
-    "TransformerXL",
+    "MemorySpec",
     "build_memory",
     "memory_class",
+    "memory_spec",
+    *_EXPORTED,
 ]

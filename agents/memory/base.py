@@ -1,11 +1,25 @@
-"""The interface every memory module implements (see the package docstring, :mod:`agents.memory`)."""
+"""The interface every memory module implements (see the package docstring, :mod:`agents.memory`), and the spec
+that a memory's file exports so that the registry finds it (:class:`MemorySpec`)."""
 
 from __future__ import annotations
 
-from typing import Any
+import dataclasses
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import torch
 from torch import Tensor, nn
+
+from agents.settings import Settings
+
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
+
+DEFAULT_ORDER = 1000  # the built-in memories take the places 0..70; a memory that names none comes after them
+NAME_PATTERN = re.compile(r"[a-z][a-z0-9_]*")  # a YAML key and a method name: model.memory: <name>, model.<name>
+COLOUR_PATTERN = re.compile(r"#[0-9a-f]{6}")
 
 
 class Memory(nn.Module):
@@ -58,3 +72,55 @@ class Memory(nn.Module):
         records before each sequence start and the P records of its positions), ``episode_step`` (N,) each step's
         decisions since its episode start. Returns the outputs (N, output_size) of the N steps, in the same order."""
         raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class MemorySpec:
+    """Everything about one memory, exported by its file as ``MEMORIES = (MemorySpec(...), ...)`` (a file may export
+    several: ``recurrent.py`` exports ``none``, ``gru`` and ``lstm``). The registry (:mod:`agents.memory`) imports
+    every module of the package and collects these; the config, the figures and the benchmark scripts read them and
+    name no memory themselves.
+
+    * ``name``: the value of ``model.memory`` (a lower-case identifier); also the method name of a run that uses it
+      (``Config.method``) and, when it has settings, the key of its block (``model.<name>``).
+    * ``label``, ``colour``: the agent in figures (``GRU-PPO``, ``#0072b2``: a hex colour); a derived method name
+      (``gru-stack4``) shows the label without its ``-PPO`` (``GRU + 4-Stack``).
+    * ``builder(model_config, input_size)``: the :class:`Memory` of a resolved ``model`` block for features of
+      ``input_size`` per step (read ``model_config.memory_size``, ``model_config.<name>``...).
+    * ``settings``: the dataclass of its block ``model.<name>`` (a :class:`agents.settings.Settings` of
+      :func:`agents.settings.param` fields: defaults, documentation, bounds, its own ``check``), or None.
+    * ``check(model_config, prefix)``: what spans the model block and its own (e.g. a width of its block that must
+      divide ``memory_size``), run when ``model.memory`` names it; raise :class:`agents.settings.ConfigError`.
+    * ``variants``: method names that configs give to a variant of it, with their labels (``gtrxl``: the gated
+      Transformer-XL, ``model.trxl.gating: true`` under ``run.method: gtrxl``).
+    * ``stateless``: no memory at all (a run is named after its other parts, else ``ppo``; every step is a sequence of
+      its own, so ``ppo.sequence_length`` must be ``max`` or 1).
+    * ``order``: its place in the registry (the built-ins take 0, 10, ..., 70; ties in file-name order), which is
+      also the place of its agent in legends.
+    """
+
+    name: str
+    label: str
+    colour: str
+    builder: Callable[[ModelConfig, int], Memory]
+    settings: type[Settings] | None = None
+    check: Callable[[ModelConfig, str], None] | None = None
+    variants: Mapping[str, str] = field(default_factory=dict)
+    stateless: bool = False
+    order: int = DEFAULT_ORDER
+
+    def __post_init__(self) -> None:
+        # a spec is written once, by whoever adds a memory: say exactly what is wrong with it
+        for name in (self.name, *self.variants):
+            if not NAME_PATTERN.fullmatch(name):
+                raise ValueError(f"memory name {name!r} is invalid: expected a lower-case identifier, e.g. 'my_rnn'")
+        if not COLOUR_PATTERN.fullmatch(self.colour):
+            raise ValueError(f"memory {self.name!r}: colour {self.colour!r} is invalid: expected '#rrggbb' (lowercase)")
+        settings = self.settings
+        if settings is not None and not (dataclasses.is_dataclass(settings) and issubclass(settings, Settings)):
+            raise ValueError(f"memory {self.name!r}: settings {settings!r} is not a dataclass deriving from Settings")
+
+    @property
+    def module(self) -> str:
+        """The module that defines the memory (its builder's): ``agents.memory.lru``."""
+        return str(getattr(self.builder, "__module__", ""))

@@ -13,16 +13,31 @@ y = z * sigmoid(O u) + (K u) * (1 - sigmoid(O u)), added to the block's input. T
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 
 from agents.layers import orthogonal
+from agents.memory.base import MemorySpec
 from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
+from agents.settings import Settings, param
 
-if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
-    from agents.config import FfmConfig
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
+
+__all__ = ["FFM", "FfmConfig"]  # agents.memory exports them too
+
+
+@dataclass
+class FfmConfig(Settings):
+    """Fast and Forgetful Memory (``model.memory: ffm``, agents/memory/ffm.py): ``model.memory_layers`` residual
+    blocks of width ``model.memory_size``, each trace_size x context_size decaying, oscillating complex traces."""
+
+    trace_size: int = param(32, "gated input channels per block, each with context_size traces", low=1)
+    context_size: int = param(4, "traces per channel (decay and frequency learned per channel x context)", low=1)
+    max_horizon: float = param(1024.0, "longest initial time constant of a trace (steps)", low=1.0)
 
 
 class FFMBlock(nn.Module):
@@ -66,3 +81,11 @@ class FFM(ScanMemory):
 
     def __init__(self, config: FfmConfig, input_size: int, dim: int, layers: int) -> None:
         super().__init__(input_size, dim, [FFMBlock(dim, config) for _ in range(layers)])
+
+
+def build(config: ModelConfig, input_size: int) -> FFM:
+    """``model.memory_layers`` FFM blocks of width ``model.memory_size``, with the block ``model.ffm``."""
+    return FFM(config.ffm, input_size, config.memory_size, config.memory_layers)
+
+
+MEMORIES = (MemorySpec("ffm", "FFM-PPO", "#117733", build, settings=FfmConfig, order=50),)  # green

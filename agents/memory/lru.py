@@ -11,6 +11,7 @@ to the block's input (u_t is the layer-normed input). The state is the complex h
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import torch
@@ -18,10 +19,29 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import orthogonal
+from agents.memory.base import MemorySpec
 from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
+from agents.settings import ConfigError, Settings, param
 
-if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
-    from agents.config import LruConfig
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
+
+__all__ = ["LRU", "LruConfig"]  # agents.memory exports them too
+
+
+@dataclass
+class LruConfig(Settings):
+    """The Linear Recurrent Unit (``model.memory: lru``, agents/memory/lru.py): ``model.memory_layers`` residual blocks
+    of width ``model.memory_size``, each a complex diagonal linear recurrence."""
+
+    state_size: int = param(0, "complex state channels per block (0: model.memory_size)", low=0)
+    r_min: float = param(0.4, "smallest initial |lambda| (the stable-init ring's inner radius)", low=0.0, high=1.0)
+    r_max: float = param(0.99, "largest initial |lambda| (the ring's outer radius, < 1)", low=0.0, high=0.999999)
+    max_phase: float = param(6.283185307179586, "largest initial phase of lambda (radians)", low=0.0)
+
+    def check(self, prefix: str) -> None:
+        if self.r_min > self.r_max:
+            raise ConfigError(f"{prefix}.r_min={self.r_min} is invalid: expected <= {prefix}.r_max={self.r_max}")
 
 
 class LRUBlock(nn.Module):
@@ -89,3 +109,13 @@ class LRU(ScanMemory):
     def __init__(self, config: LruConfig, input_size: int, dim: int, layers: int) -> None:
         states = config.state_size or dim
         super().__init__(input_size, dim, [LRUBlock(dim, states, config) for _ in range(layers)])
+
+
+def build(config: ModelConfig, input_size: int) -> LRU:
+    """``model.memory_layers`` LRU blocks of width ``model.memory_size``, with the block ``model.lru``."""
+    return LRU(config.lru, input_size, config.memory_size, config.memory_layers)
+
+
+MEMORIES = (  # Paul Tol's muted indigo
+    MemorySpec("lru", "LRU-PPO", "#332288", build, settings=LruConfig, order=40),
+)

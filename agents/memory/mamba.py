@@ -18,6 +18,7 @@ flattened into one vector, zeros at an episode start (a convolution over zero-pa
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import torch
@@ -25,51 +26,31 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import orthogonal
+from agents.memory.base import MemorySpec
 from agents.memory.scan import Layout, ScanMemory, full_precision, widen
+from agents.memory.ssm import causal_conv, check_step_sizes
+from agents.settings import Settings, param
 
-if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
-    from agents.config import MambaConfig
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
 
-
-def causal_conv(conv: nn.Conv1d, inputs: Tensor, past: Tensor) -> tuple[Tensor, Tensor]:
-    """SiLU of the depthwise ``conv`` (kernel k) over ``inputs`` (S, T, W) preceded by the k - 1 inputs before them,
-    ``past`` (S, (k - 1) * W) as the state keeps them; returns (S, T, W) and the last k - 1 inputs in the same form.
-    Computed as k shifted multiply-adds on the (S, T, W) layout (:class:`ShiftedConv`): measured 1.4x faster forward
-    + backward than ``conv1d`` on its (S, W, T) layout at a minibatch's shapes, with no transposed copies."""
-    s, t, width = inputs.shape
-    kernel = conv.kernel_size[0]
-    window = torch.cat((past.reshape(s, kernel - 1, width).to(inputs.dtype), inputs), dim=1)  # (S, k - 1 + T, W)
-    weight = conv.weight.squeeze(1).T.to(inputs.dtype)  # (k, W)
-    out = ShiftedConv.apply(window, weight, conv.bias.to(inputs.dtype))
-    return out, window[:, t:].reshape(s, (kernel - 1) * width)
+__all__ = ["Mamba", "MambaConfig"]  # agents.memory exports them too
 
 
-class ShiftedConv(torch.autograd.Function):
-    """SiLU(b + sum_j window[:, j : j + T] * w_j) over a window (S, k - 1 + T, W) with per-channel weights w (k, W)
-    and bias (W,). Its own backward writes the window's gradient in place, shift by shift: autograd of the k slices
-    would zero a window-sized tensor per shift and add them up (4 fills and 4 passes more, on fresh pages)."""
+@dataclass
+class MambaConfig(Settings):
+    """A selective state-space memory (``model.memory: mamba``, agents/memory/mamba.py): ``model.memory_layers``
+    residual Mamba blocks of width ``model.memory_size``, in pure PyTorch on the shared scan."""
 
-    @staticmethod
-    def forward(ctx, window: Tensor, weight: Tensor, bias: Tensor) -> Tensor:  # type: ignore[override]
-        kernel = weight.shape[0]
-        t = window.shape[1] - kernel + 1
-        out = torch.addcmul(bias, window[:, :t], weight[0])
-        for shift in range(1, kernel):
-            out.addcmul_(window[:, shift : shift + t], weight[shift])
-        ctx.save_for_backward(window, weight, out)
-        return F.silu(out)
+    state_size: int = param(16, "SSM states per inner channel (N)", low=1)
+    expand: int = param(2, "inner width = expand x memory_size", low=1)
+    conv_size: int = param(4, "steps of the causal depthwise convolution before the SSM (1: none)", low=1)
+    dt_rank: int = param(0, "rank of the step-size projection (0: ceil(memory_size / 16))", low=0)
+    dt_min: float = param(0.001, "smallest initial step size", low=1e-6)
+    dt_max: float = param(0.1, "largest initial step size", low=1e-6)
 
-    @staticmethod
-    def backward(ctx, grad: Tensor) -> tuple[Tensor, Tensor, Tensor]:  # type: ignore[override]
-        window, weight, out = ctx.saved_tensors
-        kernel, t = weight.shape[0], out.shape[1]
-        grad = torch.ops.aten.silu_backward(grad, out)
-        grad_window = torch.zeros_like(window)
-        grad_weight = torch.empty_like(weight)
-        for shift in range(kernel):
-            grad_window[:, shift : shift + t].addcmul_(grad, weight[shift])
-            grad_weight[shift] = (grad * window[:, shift : shift + t]).sum((0, 1))
-        return grad_window, grad_weight, grad.sum((0, 1))
+    def check(self, prefix: str) -> None:
+        check_step_sizes(self, prefix)
 
 
 class MambaBlock(nn.Module):
@@ -127,3 +108,11 @@ class Mamba(ScanMemory):
 
     def __init__(self, config: MambaConfig, input_size: int, dim: int, layers: int) -> None:
         super().__init__(input_size, dim, [MambaBlock(dim, config) for _ in range(layers)])
+
+
+def build(config: ModelConfig, input_size: int) -> Mamba:
+    """``model.memory_layers`` Mamba blocks of width ``model.memory_size``, with the block ``model.mamba``."""
+    return Mamba(config.mamba, input_size, config.memory_size, config.memory_layers)
+
+
+MEMORIES = (MemorySpec("mamba", "Mamba-PPO", "#882255", build, settings=MambaConfig, order=60),)  # wine

@@ -23,6 +23,7 @@ State per block: the convolution's last ``conv_size - 1`` inputs (conv_size - 1,
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import torch
@@ -30,11 +31,35 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import orthogonal
-from agents.memory.mamba import causal_conv
+from agents.memory.base import MemorySpec
 from agents.memory.scan import Layout, ScanMemory, full_precision, linear_scan, widen
+from agents.memory.ssm import causal_conv, check_step_sizes
+from agents.settings import ConfigError, Settings, param
 
-if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
-    from agents.config import Mamba2Config
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
+
+__all__ = ["Mamba2", "Mamba2Config"]  # agents.memory exports them too
+
+
+@dataclass
+class Mamba2Config(Settings):
+    """A state-space memory with one decay per head (``model.memory: mamba2``, agents/memory/mamba2.py; Mamba-2's
+    block): ``model.memory_layers`` residual blocks of width ``model.memory_size``, trained through matrix products
+    over chunks of steps."""
+
+    state_size: int = param(
+        16, "SSM states per head channel (N; the buffer keeps expand x memory_size x N floats per step)", low=1
+    )
+    expand: int = param(2, "inner width = expand x memory_size", low=1)
+    head_dim: int = param(64, "channels per head (one decay per head); must divide the inner width", low=1)
+    conv_size: int = param(4, "steps of the causal depthwise convolution over x, B and C (1: none)", low=1)
+    chunk_size: int = param(64, "steps per chunk of the training pass (its Q x Q products)", low=1)
+    dt_min: float = param(0.001, "smallest initial step size", low=1e-6)
+    dt_max: float = param(0.1, "largest initial step size", low=1e-6)
+
+    def check(self, prefix: str) -> None:
+        check_step_sizes(self, prefix)
 
 
 def state_space_dual(
@@ -123,3 +148,24 @@ class Mamba2(ScanMemory):
 
     def __init__(self, config: Mamba2Config, input_size: int, dim: int, layers: int) -> None:
         super().__init__(input_size, dim, [Mamba2Block(dim, config) for _ in range(layers)])
+
+
+def build(config: ModelConfig, input_size: int) -> Mamba2:
+    """``model.memory_layers`` Mamba-2 blocks of width ``model.memory_size``, with the block ``model.mamba2``."""
+    return Mamba2(config.mamba2, input_size, config.memory_size, config.memory_layers)
+
+
+def check_heads(config: ModelConfig, prefix: str) -> None:
+    """The heads split the inner width: ``head_dim`` must divide ``expand x memory_size`` (a check of the model block
+    and this memory's together, run when ``model.memory`` is mamba2)."""
+    inner = config.mamba2.expand * config.memory_size
+    if inner % config.mamba2.head_dim:
+        raise ConfigError(
+            f"{prefix}.mamba2.head_dim={config.mamba2.head_dim} is invalid: expected a divisor of the inner width "
+            f"{prefix}.mamba2.expand x {prefix}.memory_size = {inner}"
+        )
+
+
+MEMORIES = (  # Paul Tol's muted purple
+    MemorySpec("mamba2", "Mamba2-PPO", "#aa4499", build, settings=Mamba2Config, check=check_heads, order=70),
+)

@@ -1,4 +1,4 @@
-"""Memory-less and recurrent memories: ``none``, ``gru`` and ``lstm``.
+"""Memory-less and recurrent memories: ``none``, ``gru`` and ``lstm`` (three specs in :data:`MEMORIES`).
 
 The state is one tensor per slot, zeros at an episode start; the buffer keeps the state fed into every step
 (:meth:`Memory.record`'s default), and the training pass starts each sequence from its stored start state.
@@ -6,13 +6,20 @@ The state is one tensor per slot, zeros at an episode start; the buffer keeps th
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import torch
 from torch import Tensor, nn
 from torch.nn.utils.rnn import PackedSequence
 
 from agents.layers import HIDDEN_GAIN, compute_dtype, orthogonal
-from agents.memory.base import Memory
+from agents.memory.base import Memory, MemorySpec
 from agents.memory.packed_gru import packed_gru
+
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
+
+__all__ = ["NoMemory", "RecurrentMemory"]  # agents.memory exports them too
 
 
 class NoMemory(Memory):
@@ -102,3 +109,26 @@ class RecurrentMemory(Memory):
             return state.transpose(0, 1)
         hidden, cell = state
         return torch.stack((hidden.transpose(0, 1), cell.transpose(0, 1)), dim=1)
+
+
+def build_none(config: ModelConfig, input_size: int) -> NoMemory:
+    """No memory: the features pass through."""
+    return NoMemory(input_size)
+
+
+def build_gru(config: ModelConfig, input_size: int) -> RecurrentMemory:
+    """A GRU of ``model.memory_layers`` layers of ``model.memory_size`` units."""
+    return RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers)
+
+
+def build_lstm(config: ModelConfig, input_size: int) -> RecurrentMemory:
+    """An LSTM of ``model.memory_layers`` layers of ``model.memory_size`` units."""
+    return RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers)
+
+
+MEMORIES = (
+    # the memory-less agent is PPO itself (a run with memory none is named after its other parts, else ppo)
+    MemorySpec("none", "PPO", "#d55e00", build_none, stateless=True, order=0),  # vermillion (Okabe-Ito)
+    MemorySpec("gru", "GRU-PPO", "#0072b2", build_gru, order=10),  # blue
+    MemorySpec("lstm", "LSTM-PPO", "#009e73", build_lstm, order=20),  # bluish green
+)

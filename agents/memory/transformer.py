@@ -49,12 +49,51 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import HIDDEN_GAIN, compute_dtype, orthogonal
-from agents.memory.base import Memory
+from agents.memory.base import Memory, MemorySpec
+from agents.settings import ConfigError, Settings, check_choice, param
 
-if TYPE_CHECKING:  # the memory receives its settings block; the config is the floor above
-    from agents.config import TrxlConfig
+if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
+    from agents.config import ModelConfig
+
+__all__ = ["TransformerXL", "TrxlConfig"]  # agents.memory exports them too
 
 CACHE_DTYPES = {"fp32": torch.float32, "bf16": torch.bfloat16}
+
+
+@dataclass
+class TrxlConfig(Settings):
+    """The Transformer-XL memory (``model.memory: trxl``, agents/memory/transformer.py): sequence-to-one blocks whose
+    query is the current step and whose keys and values are the cached inputs of that block at the previous
+    ``memory_length`` steps of the same episode."""
+
+    layers: int = param(3, "transformer blocks", low=1)
+    heads: int = param(4, "attention heads (dim must be a multiple)", low=1)
+    dim: int = param(384, "width of the blocks (the memory's output size)", low=1)
+    memory_length: int = param(119, "steps of the episode before the current one that a step attends to", low=1)
+    positional_encoding: str = param(
+        "relative",
+        "'relative' (sinusoidal, by distance to the current step: any episode length), 'absolute' (sinusoidal) or "
+        "'learned' (by episode step, refused past positional_size), or 'none'",
+    )
+    positional_size: int = param(
+        1024, "episode steps the 'absolute' and 'learned' encodings cover (a longer episode is an error)", low=1
+    )
+    layer_norm: str = param("pre", "'pre', 'post' or 'none'")
+    gating: bool = param(False, "GTrXL: GRU gates in place of the residual connections")
+    gating_bias: float = param(2.0, "GTrXL gate bias (a positive bias starts the blocks near the identity)")
+    shared_head_projections: bool = param(
+        False, "CleanRL's variant: one (dim/heads)^2 projection shared by all heads, instead of full dim^2 ones"
+    )
+    cache_dtype: str = param("fp32", "dtype of the cached layer inputs in the slots and the buffer: 'fp32' or 'bf16'")
+
+    def check(self, prefix: str) -> None:
+        check_choice(
+            f"{prefix}.positional_encoding", self.positional_encoding, ("relative", "absolute", "learned", "none")
+        )
+        check_choice(f"{prefix}.layer_norm", self.layer_norm, ("pre", "post", "none"))
+        check_choice(f"{prefix}.cache_dtype", self.cache_dtype, tuple(CACHE_DTYPES))
+        if self.dim % self.heads:
+            raise ConfigError(f"{prefix}.dim={self.dim} is invalid: expected a multiple of {prefix}.heads={self.heads}")
 
 
 def sinusoid(positions: Tensor, dim: int) -> Tensor:
@@ -392,3 +431,13 @@ class TransformerXL(Memory):
             attended = attended.flatten(1, 2).index_select(1, rows)  # (H, N, hd): the real steps
             h = block.update(h, attended.transpose(0, 1).reshape(rows.shape[0], -1))
         return h
+
+
+def build(config: ModelConfig, input_size: int) -> TransformerXL:
+    """The Transformer-XL of the block ``model.trxl`` (its own width and depth; ``memory_size`` is not read)."""
+    return TransformerXL(config.trxl, input_size)
+
+
+MEMORIES = (  # black; the gated variant (model.trxl.gating) is the method gtrxl of configs/
+    MemorySpec("trxl", "TrXL-PPO", "#000000", build, settings=TrxlConfig, variants={"gtrxl": "GTrXL-PPO"}, order=30),
+)

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from agents.config import ConfigError, LruConfig, ModelConfig, config_from_dict
+from agents.config import ConfigError, ModelConfig, config_from_dict
 from agents.memory import build_memory, memory_class
+from agents.memory.lru import LruConfig
 from agents.memory.mamba2 import state_space_dual
 from agents.memory.scan import linear_scan, reference_scan
 from agents.training.trainer import Trainer
@@ -210,7 +211,7 @@ def test_the_shifted_convolution_has_the_gradients_of_autograd() -> None:
     """Mamba's depthwise convolution (its own backward) against the same shifted multiply-adds under autograd."""
     from torch.nn import functional as F
 
-    from agents.memory.mamba import ShiftedConv
+    from agents.memory.ssm import ShiftedConv
 
     generator = torch.Generator().manual_seed(6)
     window, weight, bias = (

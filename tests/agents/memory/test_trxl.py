@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from agents.config import ConfigError, TrxlConfig, config_from_dict
-from agents.memory import TransformerXL
-from agents.memory.transformer import shift_window
+from agents.config import ConfigError, config_from_dict
+from agents.memory.transformer import TransformerXL, TrxlConfig, shift_window
 from agents.policy.actor import refresh_copy
 from agents.training.buffer import RolloutBuffer
 from agents.training.sequences import pad_sequences, split_sequences
