@@ -7,7 +7,10 @@
   they fit together (columns, one config per cell);
 * :mod:`agents.analysis.stats`: the interquartile mean and stratified-bootstrap intervals (the rliable estimates);
 * :mod:`agents.analysis.scores`: run-level scores, IQM aggregates across runs and tasks, summaries, text tables;
-* :mod:`agents.analysis.plots`: sample-efficiency curves and final performance (matplotlib, imported when drawing).
+* :mod:`agents.analysis.across_tasks`: scores normalised per task and aggregated across tasks (IQM, mean, median,
+  optimality gap, probability of improvement, performance profiles, each with its interval);
+* :mod:`agents.analysis.plots`: sample-efficiency curves and final performance (matplotlib, imported when drawing),
+  and :mod:`agents.analysis.across_tasks_figure`: the figure of the aggregate across tasks.
 
 numpy and the standard library at import time; the config (read for a run's saved settings) is imported where it
 is used. The policy room is its sibling: neither imports the other.

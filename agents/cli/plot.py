@@ -4,7 +4,9 @@
 Reads every directory's ``episodes.csv`` (and ``training.csv`` where present) and writes, as PNG and PDF, the
 sample-efficiency curves (``curves``: training-seed return beside the novel-seed metric, one row per task) and the
 final performance (``final``: each run's last checkpoint), both as the IQM across runs with a 95% stratified-bootstrap
-interval; prints the final-performance table. A metric with a known range (success, commands executed: [0, 1]) is
+interval, and for several tasks the aggregate across them (``across_tasks``: final scores normalised per task; IQM,
+mean, optimality gap, probability of improvement over GRU-PPO, performance profiles); prints the final-performance
+table. A metric with a known range (success, commands executed: [0, 1]) is
 shown on that whole range, with a dashed line at the task's chance level where it is known; ``--zoom`` fits the axes
 to the data instead.
 """
@@ -16,6 +18,7 @@ import sys
 import warnings
 
 from agents.analysis import plots, results, scores
+from agents.analysis.across_tasks_figure import plot_across_tasks
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -42,6 +45,7 @@ def main(argv: list[str] | None = None) -> int:
                 seed=args.seed,
                 zoom=args.zoom,
             )
+            written += plot_across_tasks(args.results, args.out, args.column, reps=args.reps, seed=args.seed)
             final = scores.aggregate(
                 results.read_episodes(*args.results), args.column, steps="last", reps=args.reps, seed=args.seed
             )

@@ -63,10 +63,13 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
     * ``training.csv``: the runs' ``training.csv`` one after the other, ``run`` as above;
     * ``summary.json``: :func:`agents.analysis.scores.summarize` of those records (per run and step the means; per
       method and task, at every step the runs share, the IQM across runs with its 95% stratified-bootstrap interval),
-      the runs not finished yet, the protocol and provenance;
-    * ``plots/``: the curves and final-performance figures of :func:`agents.analysis.plots.plot_results`.
+      the runs not finished yet, the protocol and provenance; for a panel of several tasks also ``across_tasks``
+      (:func:`agents.analysis.across_tasks.across_tasks`: normalised final scores aggregated across the tasks);
+    * ``plots/``: the curves and final-performance figures of :func:`agents.analysis.plots.plot_results`, and for
+      several tasks ``across_tasks.png/.pdf``.
 
     Runs not finished are left out (and listed). Returns the results directory."""
+    from agents.analysis.across_tasks import across_tasks
     from agents.analysis.results import TRAINING_COLUMNS, read_episodes
     from agents.analysis.scores import summarize
     from agents.evaluation.records import read_records, write_records
@@ -91,12 +94,13 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
     write_records(out / "episodes.csv", records)
     atomic_write_text(out / "training.csv", _csv_text(TRAINING_COLUMNS, rows))
     first = finished[0].config
+    episodes = read_episodes(out)
     summary = {
         "panel": panel.name,
         "config": str(panel.source) if panel.source else None,
         "overrides": list(panel.overrides),
         "unfinished": unfinished,
-        **summarize(read_episodes(out)),
+        **summarize(episodes),
         "evaluation": {
             "seeds": first.eval_seeds,
             "repetitions": first.eval.repetitions,
@@ -106,6 +110,9 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
             **provenance(),
         },
     }
+    spanning = across_tasks(episodes)  # None for a panel of one task
+    if spanning is not None:
+        summary["across_tasks"] = spanning
     write_json_atomic(out / "summary.json", summary, sort_keys=False)
     if plots:
         _plot(out, echo)
@@ -124,7 +131,10 @@ def _plot(results_dir: Path, echo: Echo) -> None:
         echo(f"plots: skipped ({err}); the records are in {results_dir}")
         return
     try:
+        from agents.analysis.across_tasks_figure import plot_across_tasks
+
         paths = plots.plot_results([results_dir], results_dir / "plots")
+        paths += plot_across_tasks([results_dir], results_dir / "plots")
     except Exception as err:  # noqa: BLE001 (whatever goes wrong in a figure must not hide the results)
         echo(f"plots: failed ({type(err).__name__}: {err}); retry: python scripts/plot.py {results_dir}")
         return
