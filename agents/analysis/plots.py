@@ -3,17 +3,24 @@ intervals across runs (:mod:`agents.analysis.scores`, :mod:`agents.analysis.stat
 
 Figures are built on ``matplotlib.figure.Figure`` with an Agg canvas (no pyplot, no global backend switch; matplotlib
 is imported inside the functions), returned for display and written as PNG and PDF through
-:func:`agents.runtime.io.atomic_write_bytes`. Every method keeps one colour: the known agents have fixed Okabe-Ito
-colours, any other method takes the next spare colour in the sorted order of the unknown names.
+:func:`agents.runtime.io.atomic_write_bytes`. Every method keeps one colour: the known agents have fixed colours, any
+other method takes the next spare colour in the sorted order of the unknown names.
 
-Methods are labelled as in the paper (:data:`METHOD_LABELS`: PPO, GRU-PPO, 4-Stack, ...), tasks by their environment
-id and non-default options (:func:`task_title`). A metric with a known range (:mod:`agents.analysis.metrics`: success
-and commands executed in [0, 1], counts from 0) is shown on that whole range unless ``zoom`` is set, and a dashed line
-marks the task's chance level where the metric table knows it for the task's options.
+Methods are labelled as in the paper (PPO, GRU-PPO, 4-Stack, ...), tasks by their environment id and non-default
+options (:func:`task_title`). An agent named after a memory (``gru``, ``trxl``, a variant such as ``gtrxl``) takes
+its label, colour and place in legends from the memory's own file (the registry, :data:`agents.memory.MEMORY_SPECS`);
+the agents that are no memory (PPO, the frame stacks, HELM) from this module's tables (:data:`METHOD_COLORS`,
+:data:`METHOD_LABELS`, :data:`METHOD_PLACES`). Names the configs derive are read by rules: ``gru-stack4`` joins its
+parts' labels, ``trxl_recon`` adds an auxiliary loss to its method's (:data:`SUFFIX_LABELS`).
+
+A metric with a known range (:mod:`agents.analysis.metrics`: success and commands executed in [0, 1], counts from 0)
+is shown on that whole range unless ``zoom`` is set, and a dashed line marks the task's chance level where the
+metric table knows it for the task's options.
 """
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 import textwrap
@@ -35,10 +42,13 @@ if TYPE_CHECKING:
 __all__ = [
     "METHOD_COLORS",
     "METHOD_LABELS",
+    "METHOD_PLACES",
     "SPARE_COLORS",
+    "SUFFIX_LABELS",
     "chance_level",
     "curves_figure",
     "final_figure",
+    "known_methods",
     "method_colors",
     "method_label",
     "metric_label",
@@ -48,18 +58,12 @@ __all__ = [
     "task_title",
 ]
 
+# The agents that are no memory of the registry (a memory's colour, label and place are in its file, agents/memory/).
 METHOD_COLORS = {  # Okabe-Ito, colour-blind safe; fixed per method in every figure
     "ppo": "#d55e00",  # vermillion
-    "gru": "#0072b2",  # blue
-    "lstm": "#009e73",  # bluish green
     "stack4": "#e69f00",  # orange
     "stack16": "#cc79a7",  # reddish purple
     "helm": "#56b4e9",  # sky blue
-    "trxl": "#000000",  # black
-    "lru": "#332288",  # Paul Tol's muted indigo
-    "ffm": "#117733",  # green
-    "mamba": "#882255",  # wine
-    "mamba2": "#aa4499",  # Paul Tol's muted purple
 }
 SPARE_COLORS = (  # for other methods, in this order: the rest of Paul Tol's muted scheme, then Okabe-Ito's yellow
     "#44aa99",
@@ -69,23 +73,20 @@ SPARE_COLORS = (  # for other methods, in this order: the rest of Paul Tol's mut
     "#ddcc77",
     "#f0e442",
 )
-METHOD_LABELS = {  # the paper's names of the agents, keyed by the method names of configs/ (run.method, Config.method)
+METHOD_LABELS = {  # the paper's names of these agents, keyed by the method names of configs/ (run.method, method)
     "ppo": "PPO",
-    "gru": "GRU-PPO",
-    "lstm": "LSTM-PPO",
     "stack4": "4-Stack",
     "stack16": "16-Stack",
     "helm": "HELM",
-    "trxl": "TrXL-PPO",
-    "gtrxl": "GTrXL-PPO",
-    "trxl_recon": "TrXL-PPO + recon.",  # observation reconstruction (ppo.reconstruction_coef)
-    "trxl_gt": "TrXL-PPO + GT",  # ground-truth estimation (ppo.ground_truth_coef)
-    "lru": "LRU-PPO",
-    "ffm": "FFM-PPO",
-    "mamba": "Mamba-PPO",
-    "mamba2": "Mamba2-PPO",
 }
-PART_LABELS = {"gru": "GRU", "lstm": "LSTM", "helm": "HELM"}  # parts of derived names such as gru-stack4
+# Their places in legends among the memories' (MemorySpec.order: the built-ins take 0, 10, ..., 70): PPO with the
+# memory-less one, the frame stacks and HELM after the recurrent memories (10, 20) and before the transformer (30).
+METHOD_PLACES = {"ppo": 0, "stack4": 21, "stack16": 22, "helm": 23}
+PART_LABELS = {"helm": "HELM"}  # parts of derived names such as gru-helm besides the memories' (and stackN)
+SUFFIX_LABELS = {  # auxiliary losses that configs name as <method>_<suffix> (trxl_recon: "TrXL-PPO + recon.")
+    "recon": "recon.",  # observation reconstruction (ppo.reconstruction_coef)
+    "gt": "GT",  # ground-truth estimation (ppo.ground_truth_coef)
+}
 STEPS_LABEL = "Environment steps (millions)"
 BAND_ALPHA = 0.2
 RANGE_PAD = 0.03  # a fixed range is padded by this fraction, so that a curve at 0 or 1 stays visible
@@ -95,30 +96,59 @@ TITLE_WIDTH = 52  # characters per line of a curves panel's title (4.6 inches wi
 FINAL_TITLE_WIDTH = 40  # and of a final-performance panel's (4.2 inches, with the method labels beside it)
 
 
-def method_colors(methods: Iterable[str]) -> dict[str, str]:
-    """A colour per method: the fixed colour of a known method, spare colours for the others in sorted order.
+@functools.cache
+def known_methods() -> tuple[dict[str, str], dict[str, str], dict[str, str]]:
+    """The fixed colours (in legend order), the labels and the part labels of the known methods: this module's
+    agents and the memories of the registry (each memory's name and its variants' method names; the part label of a
+    memory is its label without ``-PPO``). Legends order them by place (:data:`METHOD_PLACES`, ``MemorySpec.order``),
+    this module's agents first at a shared place, then the registry's order."""
+    from agents.memory import MEMORY_SPECS  # imported when a figure is drawn: reading results needs no torch
 
-    The dict lists the known methods in the order of :data:`METHOD_COLORS`, then the others sorted: the order of
+    places = [(place, 0, index, method) for index, (method, place) in enumerate(METHOD_PLACES.items())]
+    places += [(spec.order, 1, index, spec.name) for index, spec in enumerate(MEMORY_SPECS.values())]
+    fixed = {**METHOD_COLORS, **{spec.name: spec.colour for spec in MEMORY_SPECS.values()}}
+    colours = {method: fixed[method] for *_, method in sorted(places)}
+    labels = dict(METHOD_LABELS)
+    parts = dict(PART_LABELS)
+    for spec in MEMORY_SPECS.values():
+        labels |= {spec.name: spec.label, **spec.variants}
+        if not spec.stateless:  # a memory-less run is named after its other parts: none is never a part
+            parts[spec.name] = spec.label.removesuffix("-PPO")
+    return colours, labels, parts
+
+
+def method_colors(methods: Iterable[str]) -> dict[str, str]:
+    """A colour per method: the fixed colour of a known method (:func:`known_methods`), spare colours for the others
+    in sorted order.
+
+    The dict lists the known methods in legend order (:func:`known_methods`), then the others sorted: the order of
     legends and charts."""
     methods = set(methods)
-    known = [method for method in METHOD_COLORS if method in methods]
+    fixed = known_methods()[0]
+    known = [method for method in fixed if method in methods]
     unknown = sorted(methods - set(known))
     return {
-        **{method: METHOD_COLORS[method] for method in known},
+        **{method: fixed[method] for method in known},
         **{method: SPARE_COLORS[i % len(SPARE_COLORS)] for i, method in enumerate(unknown)},
     }
 
 
 def method_label(method: str) -> str:
-    """The readable name of a method: :data:`METHOD_LABELS`; a derived name (``gru-stack4``, ``lstm-helm``) joins
-    the names of its parts (``GRU + 4-Stack``); any other name is shown as it is."""
-    if method in METHOD_LABELS:
-        return METHOD_LABELS[method]
+    """The readable name of a method: a known method's label (:func:`known_methods`); a name with an auxiliary
+    loss's suffix (``trxl_recon``, ``gru_gt``: :data:`SUFFIX_LABELS`) adds it to its method's (``TrXL-PPO +
+    recon.``); a derived name (``gru-stack4``, ``lstm-helm``) joins the labels of its parts (``GRU + 4-Stack``); any
+    other name is shown as it is."""
+    _, labels, part_labels = known_methods()
+    if method in labels:
+        return labels[method]
+    base, _, suffix = method.rpartition("_")
+    if base and suffix in SUFFIX_LABELS and method_label(base) != base:
+        return f"{method_label(base)} + {SUFFIX_LABELS[suffix]}"
     parts = method.split("-")
     labels = []
     for part in parts:
-        if part in PART_LABELS:
-            labels.append(PART_LABELS[part])
+        if part in part_labels:
+            labels.append(part_labels[part])
         elif part.startswith("stack") and part[5:].isdigit():
             labels.append(f"{int(part[5:])}-Stack")
         else:

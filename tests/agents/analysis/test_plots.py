@@ -3,6 +3,8 @@ axis ranges, chance lines, legend entries, method labels and task titles, read o
 
 from __future__ import annotations
 
+import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -14,15 +16,20 @@ from agents.analysis.metrics import METRICS
 from agents.config import expand_grid, read_config_file
 from tests.support.synthetic_results import episode_rows, write_csv, write_results
 
+ROOT = Path(__file__).resolve().parents[3]
+FIXED = plots.known_methods()[0]  # the fixed colour of every known method: this module's agents and the memories'
+
 
 def test_known_methods_keep_their_colour_in_any_company() -> None:
     alone = plots.method_colors(["gru"])
     crowd = plots.method_colors(["zeta", "gru", "ppo", "alpha", "helm", "stack16", "lstm", "stack4", "trxl"])
-    assert alone["gru"] == crowd["gru"] == plots.METHOD_COLORS["gru"]
+    assert alone["gru"] == crowd["gru"] == FIXED["gru"]
     assert list(crowd) == ["ppo", "gru", "lstm", "stack4", "stack16", "helm", "trxl", "alpha", "zeta"]
     assert crowd["alpha"] == plots.SPARE_COLORS[0] and crowd["zeta"] == plots.SPARE_COLORS[1]
     assert len(set(crowd.values())) == len(crowd), "no two methods share a colour"
-    assert not set(plots.SPARE_COLORS) & set(plots.METHOD_COLORS.values())
+    assert not set(plots.SPARE_COLORS) & set(FIXED.values())
+    agents = [method for method in FIXED if method != "none"]  # none: the memory-less agent, PPO's colour
+    assert len({FIXED[method] for method in agents}) == len(agents), "no two known agents share a colour"
     assert plots.method_colors(["b", "a"]) == plots.method_colors(["a", "b"]), "deterministic, whatever the order"
     many = plots.method_colors(f"m{i:02d}" for i in range(len(plots.SPARE_COLORS) + 2))
     assert many["m00"] == many[f"m{len(plots.SPARE_COLORS):02d}"], "spare colours cycle"
@@ -76,9 +83,9 @@ def test_curves_figure_panels_and_colours(loaded: results.Results) -> None:
     assert [axes.get_ylabel() for axes in figure.axes] == ["Return", "Commands Executed", "Return", "Success Rate"]
     assert figure.axes[-1].get_xlabel() == plots.STEPS_LABEL
     drawn = {color for _, color in line_colors(figure)}
-    assert drawn == {plots.METHOD_COLORS["ppo"], plots.METHOD_COLORS["gru"], plots.SPARE_COLORS[0]}
+    assert drawn == {FIXED["ppo"], FIXED["gru"], plots.SPARE_COLORS[0]}
     novel = figure.axes[3]
-    gru = next(line for line in novel.lines if to_hex(line.get_color()) == plots.METHOD_COLORS["gru"])
+    gru = next(line for line in novel.lines if to_hex(line.get_color()) == FIXED["gru"])
     np.testing.assert_allclose(gru.get_xdata(), [0.008192, 0.016384, 0.024576])
     expected = [row["iqm"] for row in scores.aggregate(loaded.episodes.where(task="ProofOfMemory-v0", method="gru"))]
     np.testing.assert_allclose(gru.get_ydata(), expected)
@@ -90,7 +97,7 @@ def test_curves_without_training_and_with_a_subset_keep_colours(loaded: results.
     subset = loaded.episodes.select(loaded.episodes["method"] == "gru")
     figure = plots.curves_figure(subset, None, reps=100)
     assert len(figure.axes) == 2 and all("novel seeds" in axes.get_title() for axes in figure.axes)
-    assert {color for _, color in line_colors(figure)} == {plots.METHOD_COLORS["gru"]}
+    assert {color for _, color in line_colors(figure)} == {FIXED["gru"]}
 
 
 def test_final_figure_bars(loaded: results.Results) -> None:
@@ -101,8 +108,8 @@ def test_final_figure_bars(loaded: results.Results) -> None:
         assert [label.get_text() for label in axes.get_yticklabels()] == ["PPO", "GRU-PPO", "custom"]
         bars = axes.patches
         assert [to_hex(bar.get_facecolor()[:3]) for bar in bars] == [
-            plots.METHOD_COLORS["ppo"],
-            plots.METHOD_COLORS["gru"],
+            FIXED["ppo"],
+            FIXED["gru"],
             plots.SPARE_COLORS[0],
         ]
         for bar, method in zip(bars, ("ppo", "gru", "custom"), strict=True):
@@ -125,15 +132,13 @@ def test_save_figure_writes_png_and_pdf_atomically(loaded: results.Results, tmp_
 
 # --------------------------------------------------- C8: ranges, chance lines, legends, readable labels and titles
 def test_every_method_of_the_configs_has_a_readable_label() -> None:
-    root = Path(__file__).resolve().parents[3]
     methods = set()
-    for path in sorted((root / "configs").rglob("*.yaml")):
+    for path in sorted((ROOT / "configs").rglob("*.yaml")):
         raw = read_config_file(path)
         methods |= {point.config.method for point in expand_grid(raw)}
     assert methods >= {"ppo", "gru", "stack4", "stack16", "helm"}
-    assert {method: plots.method_label(method) for method in sorted(methods)} == {
-        method: plots.METHOD_LABELS[method] for method in sorted(methods)
-    }
+    unreadable = {method for method in methods if plots.method_label(method) == method}
+    assert not unreadable, f"methods of configs/ without a label: {sorted(unreadable)}"
     assert [plots.method_label(m) for m in ("ppo", "gru", "lstm", "stack4", "stack16", "helm")] == [
         "PPO",
         "GRU-PPO",
@@ -144,6 +149,66 @@ def test_every_method_of_the_configs_has_a_readable_label() -> None:
     ]
     assert plots.method_label("gru-stack4") == "GRU + 4-Stack" and plots.method_label("lstm-helm") == "LSTM + HELM"
     assert plots.method_label("custom") == "custom" and plots.method_label("gru-custom") == "gru-custom"
+
+
+# What the figures showed before the memories' labels and colours moved into their files (agents/memory/): every
+# method of the committed results and of configs/, with a few derived names, in legend order.
+BEFORE = {  # method: (label, colour), the colours as method_colors gives them for all of these at once
+    "ppo": ("PPO", "#d55e00"),
+    "gru": ("GRU-PPO", "#0072b2"),
+    "lstm": ("LSTM-PPO", "#009e73"),
+    "stack4": ("4-Stack", "#e69f00"),
+    "stack16": ("16-Stack", "#cc79a7"),
+    "helm": ("HELM", "#56b4e9"),
+    "trxl": ("TrXL-PPO", "#000000"),
+    "lru": ("LRU-PPO", "#332288"),
+    "ffm": ("FFM-PPO", "#117733"),
+    "mamba": ("Mamba-PPO", "#882255"),
+    "mamba2": ("Mamba2-PPO", "#aa4499"),
+    "custom": ("custom", "#44aa99"),
+    "gru-stack4": ("GRU + 4-Stack", "#999933"),
+    "gtrxl": ("GTrXL-PPO", "#88ccee"),
+    "lstm-helm": ("LSTM + HELM", "#cc6677"),
+    "trxl_gt": ("TrXL-PPO + GT", "#ddcc77"),
+    "trxl_recon": ("TrXL-PPO + recon.", "#f0e442"),
+}
+
+
+def committed_methods() -> set[str]:
+    """The method names of the committed results (results/**/episodes.csv and summary.json)."""
+    methods = set()
+    for path in ROOT.glob("results/**/episodes.csv"):
+        with open(path, newline="") as rows:
+            methods |= {row["method"] for row in csv.DictReader(rows)}
+    for path in ROOT.glob("results/**/summary.json"):
+        stack = [json.loads(path.read_text())]
+        while stack:  # every "method" value at any depth
+            node = stack.pop()
+            if isinstance(node, dict):
+                methods |= {node["method"]} if isinstance(node.get("method"), str) else set()
+                stack.extend(node.values())
+            elif isinstance(node, list):
+                stack.extend(node)
+    return methods
+
+
+def test_figures_label_and_colour_every_committed_method_as_before() -> None:
+    methods = committed_methods()
+    assert methods >= {"ppo", "gru", "trxl", "mamba2", "stack4"}
+    for path in sorted((ROOT / "configs").rglob("*.yaml")):
+        methods |= {point.config.method for point in expand_grid(read_config_file(path))}
+    assert methods <= set(BEFORE), f"methods to add to BEFORE: {sorted(methods - set(BEFORE))}"
+    colours = plots.method_colors(BEFORE)
+    assert list(colours.items()) == [(method, colour) for method, (_, colour) in BEFORE.items()], "order and colours"
+    assert {method: plots.method_label(method) for method in BEFORE} == {m: label for m, (label, _) in BEFORE.items()}
+
+
+def test_suffix_and_part_rules_name_no_memory() -> None:
+    """An auxiliary loss's suffix and a derived name's parts work for any memory of the registry."""
+    assert plots.method_label("gru_recon") == "GRU-PPO + recon." and plots.method_label("gtrxl_gt") == "GTrXL-PPO + GT"
+    assert plots.method_label("mamba2-stack4") == "Mamba2 + 4-Stack"
+    assert plots.method_label("gru-stack4_recon") == "GRU + 4-Stack + recon."
+    assert plots.method_label("custom_gt") == "custom_gt" and plots.method_label("_gt") == "_gt"
 
 
 def test_the_metric_table_knows_ranges_and_chance_levels() -> None:
@@ -244,7 +309,7 @@ def test_methods_without_a_shared_step_leave_the_legend_and_are_named(tmp_path: 
     with pytest.warns(results.ResultsWarning) as caught:
         figure = plots.curves_figure(episodes, None, reps=100)
     assert legend_texts(figure) == ["PPO", "GRU-PPO", "chance"]
-    assert plots.METHOD_COLORS["stack4"] not in {color for _, color in line_colors(figure)}
+    assert FIXED["stack4"] not in {color for _, color in line_colors(figure)}
     assert any("'stack4' (4-Stack)" in str(w.message) and "drawn in no panel" in str(w.message) for w in caught)
 
 
