@@ -1,15 +1,20 @@
 """The memory modules alone: forward + backward of the training pass over S sequences of L steps, per memory and L.
 
     python scripts/benchmark_memories.py [--memories gru,lru,ffm,mamba,mamba2] [--lengths 64,128,...,4096]
-        [--sequences 16] [--width 128] [--repeats 3] [--threads 0] [--device cpu|cuda]
+        [--sequences 16] [--width 128] [--repeats 3] [--threads 0] [--device cpu|cuda] [--set KEY=VALUE ...]
         [--out results/benchmarks/memories.json] [--plot results/benchmarks/memories.png]
 
-Each memory is built as the trainer builds it (``model.memory`` at ``model.memory_size`` = width, one layer, its
-block's defaults), fed random features of that width for S full sequences of L steps from zero start states (the
-trainer's ``sequences`` call, with the padding mask and the flat step layout of a minibatch), and timed over
+The memories: by default every memory of the registry (``agents.memory.MEMORY_SPECS``, in its order) whose training
+pass starts from a stored state per sequence, which this benchmark feeds (the memory-less one and a window memory,
+whose training pass reads the records before each sequence, are left out). Each is built as the trainer builds it
+(``model.memory`` at ``model.memory_size`` = width, one layer, its block's defaults and ``--set`` overrides such as
+``model.mamba2.head_dim=16``, validated as a config is: a block that does not fit the width is an error naming the
+key), fed random features of that width for S full sequences of L steps from zero start states (the trainer's
+``sequences`` call, with the padding mask and the flat step layout of a minibatch), and timed over
 ``sum(output ** 2).backward()``: the best of ``--repeats`` after a warm-up (the least disturbed; the machine may be
-shared, and every row records the load average). The GRU runs through the project's own path (the packed GRU on the
-CPU, cuDNN's on CUDA). ``--device cuda`` takes the same measurement on a GPU in one command.
+shared, and every row records the load average). Speedups are over the default ``model.memory`` (the GRU), which
+runs through the project's own path (the packed GRU on the CPU, cuDNN's on CUDA). ``--device cuda`` takes the same
+measurement on a GPU in one command.
 
 The table goes to ``runs/benchmarks/memories.json`` (git-ignored) unless ``--out`` names another file; a partial run
 (fewer memories or lengths than the defaults) never replaces a full table. ``--plot`` draws the curve.
@@ -18,7 +23,7 @@ The table goes to ``runs/benchmarks/memories.json`` (git-ignored) unless ``--out
 from __future__ import annotations
 
 import argparse
-import math
+import functools
 import os
 import sys
 import time
@@ -26,19 +31,40 @@ from pathlib import Path
 
 import torch
 
-from agents.config import ModelConfig
-from agents.memory import build_memory
+from agents.config import ConfigError, ModelConfig, config_from_dict
+from agents.memory import MEMORY_SPECS, build_memory
 from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, atomic_write_bytes, json_table, provenance
 
-MEMORIES = ("gru", "lru", "ffm", "mamba", "mamba2")
+REFERENCE = ModelConfig().memory  # the speedups are over the default memory (the GRU of GRU-PPO)
 LENGTHS = (64, 128, 256, 512, 1024, 2048, 4096)
+WIDTH = 128
 DEFAULT_OUT = SCRATCH / "benchmarks" / "memories.json"
+
+
+def memory_config(name: str, width: int, overrides: list[str]) -> ModelConfig:
+    """The model block of ``name`` at ``width``, one layer, its block's defaults and ``overrides``, validated."""
+    raw = {"model": {"memory": name, "memory_size": width, "memory_layers": 1}}
+    return config_from_dict(raw, overrides).model
+
+
+@functools.cache
+def default_memories() -> tuple[str, ...]:
+    """The registry's memories whose training pass starts from a stored state per sequence (``history`` None), in
+    its order: each is built at the default width to tell (a window memory sets ``history``), on the meta device
+    (shapes only: nothing is allocated)."""
+    found = []
+    for name, spec in MEMORY_SPECS.items():
+        if not spec.stateless:
+            with torch.device("meta"):
+                memory = build_memory(memory_config(name, WIDTH, []), WIDTH)
+            found += [name] if memory.history is None else []
+    return tuple(found)
 
 
 def partial_reasons(memories: list[str], lengths: list[int]) -> str:
     """Why a run is not the full table (every memory at every length), empty when it is."""
     reasons = []
-    if set(memories) != set(MEMORIES):
+    if set(memories) != set(default_memories()):
         reasons.append(f"memories {','.join(memories)}")
     if set(lengths) != set(LENGTHS):
         reasons.append(f"lengths {','.join(map(str, lengths))}")
@@ -103,41 +129,54 @@ def plot(record: dict, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--memories", default=",".join(MEMORIES), help="comma-separated model.memory names")
+    parser.add_argument(
+        "--memories", default="", help="comma-separated model.memory names (default: every one this benchmark feeds)"
+    )
     parser.add_argument("--lengths", default=",".join(map(str, LENGTHS)), help="comma-separated sequence lengths")
     parser.add_argument("--sequences", type=int, default=16, help="sequences per pass (S)")
-    parser.add_argument("--width", type=int, default=128, help="model.memory_size of every memory")
+    parser.add_argument("--width", type=int, default=WIDTH, help="model.memory_size of every memory")
     parser.add_argument("--repeats", type=int, default=3, help="timed passes after a warm-up (the best is kept)")
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
     parser.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N")
     parser.add_argument("--plot", type=Path, help="also draw the curve to this PNG")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a config override of every memory's model block, e.g. model.mamba2.head_dim=16 (repeatable)",
+    )
     add_out_argument(parser, DEFAULT_OUT, "the record")
     args = parser.parse_args(argv)
-    memories = [m for m in args.memories.split(",") if m]
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    memories = [m for m in (args.memories or ",".join(default_memories())).split(",") if m]
     try:
         lengths = [int(length) for length in args.lengths.split(",") if length]
     except ValueError:
         parser.error(f"--lengths {args.lengths!r}: expected comma-separated integers")
-    unknown = sorted(set(memories) - set(MEMORIES))
+    valid = default_memories()
+    unknown = sorted(set(memories) - set(valid))
     if unknown or not memories:
-        parser.error(f"--memories {args.memories!r}: unknown {unknown}; valid memories: {', '.join(MEMORIES)}")
+        parser.error(f"--memories {args.memories!r}: unknown {unknown}; valid memories: {', '.join(valid)}")
     if not lengths or min(lengths) < 1:
         parser.error(f"--lengths {args.lengths!r}: expected integers >= 1")
     if args.device != "cpu" and not torch.cuda.is_available():
         parser.error(f"--device {args.device}: CUDA is not available here")
+    configs = {}
+    for memory_name in memories:  # every setting checked before anything is measured
+        try:
+            configs[memory_name] = memory_config(memory_name, args.width, args.set)
+        except ConfigError as err:
+            parser.error(f"--memories {memory_name} at --width {args.width}: {err} (set it with --set KEY=VALUE)")
     target = ResultFile.for_command(
         parser, args.out, DEFAULT_OUT, json_table(record_partial), partial_reasons(memories, lengths)
     )
-    if args.threads:
-        torch.set_num_threads(args.threads)
     torch.manual_seed(0)
     milliseconds: dict[str, dict[str, float]] = {}
     load: dict[str, float] = {}
     for memory_name in memories:
-        config = ModelConfig(memory=memory_name, memory_size=args.width, memory_layers=1)
-        # Mamba-2's heads of 64 channels at width >= 32; fewer channels where 64 does not divide the inner width
-        config.mamba2.head_dim = math.gcd(config.mamba2.head_dim, config.mamba2.expand * args.width)
-        memory = build_memory(config, args.width).to(args.device)
+        memory = build_memory(configs[memory_name], args.width).to(args.device)
         milliseconds[memory_name] = {}
         for length in lengths:
             seconds = forward_backward_seconds(memory, args.width, args.sequences, length, args.repeats, args.device)
@@ -145,9 +184,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{memory_name:6s} L={length:5d}  {1000 * seconds:9.1f} ms", flush=True)
         load[memory_name] = os.getloadavg()[0]
     speedup = {
-        name: {length: milliseconds["gru"][length] / value for length, value in row.items()}
+        name: {length: milliseconds[REFERENCE][length] / value for length, value in row.items()}
         for name, row in milliseconds.items()
-        if name != "gru" and "gru" in milliseconds
+        if name != REFERENCE and REFERENCE in milliseconds
     }
     record = {
         "setting": {
@@ -161,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
             "measure": "best time of memory.sequences(...).square().sum().backward() over S full sequences of L steps",
         },
         "milliseconds": milliseconds,
-        "speedup_over_gru": speedup,
+        f"speedup_over_{REFERENCE}": speedup,
         "loadavg_after_each_memory": load,
         **provenance(),
     }

@@ -9,7 +9,8 @@
         [--threads 0 --updates 2 --repeats 3 --out results/benchmarks/training_scan_memories_2threads.json]
         (--threads 1 --updates 2 --repeats 1: training_scan_memories.json)
 
-* end to end, per method (configs/mortar_mayhem_b_grid/<method>.yaml at the benchmark's batch): ``train_update()``
+* end to end, per method (configs/mortar_mayhem_b_grid/<method>.yaml at the benchmark's batch; a memory of the
+  registry without a file of its own runs GRU-PPO's file with ``model.memory`` set to it): ``train_update()``
   (rollout in the batched env, GAE, sequence splitting, PPO epochs with optimizer steps), env steps per second, with
   the share of the rollout, the HELM branch's share (its frozen forward passes during the rollout) and the peak
   resident memory of a process that trains only that method (each method runs in its own child process);
@@ -26,6 +27,10 @@
   the measurement runs on CUDA as well (``--device cuda``: a few minutes), where the peak is torch's allocator's;
 * SB3: stable-baselines3-contrib RecurrentPPO at the same workers x steps, epochs and minibatch size, when
   ``sb3_contrib`` is importable (its own default network: CNN features 256, separate actor/critic LSTMs of 256).
+
+The methods: the full table is GRU-PPO (the default ``model.memory``, the reference of every ``/ GRU`` ratio) and
+the agents that are no memory (PPO, 4-Stack, 16-Stack, HELM); ``--methods`` may also name every other memory of the
+registry (``agents.memory.MEMORY_SPECS``) and its variants' method names (``gtrxl``), listed by ``--help``.
 
 ``--precision`` is the runs' ``run.precision``: bf16 (the default; bfloat16 autocast in the training passes, a
 bfloat16 copy of the weights acting, the linear recurrences in fp32) or fp32; every method runs at either.
@@ -59,7 +64,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.config import Config, load_config
+from agents.config import Config, ModelConfig, load_config
+from agents.memory import MEMORY_SPECS
 from agents.policy.models import log_probs_and_entropy
 from agents.runtime.io import SCRATCH, ResultFile, add_out_argument, json_table, provenance
 from agents.training.ppo import filled_index
@@ -68,8 +74,16 @@ from agents.training.trainer import Trainer
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG_DIR = ROOT / "configs" / "mortar_mayhem_b_grid"
-METHODS = ("gru", "ppo", "stack4", "stack16", "helm")  # the full table
-EXTRA_METHODS = ("trxl", "gtrxl", "lru", "ffm", "mamba", "mamba2")  # measured on request (--methods), beside GRU-PPO
+REFERENCE = ModelConfig().memory  # GRU-PPO's memory: the paper's baseline, the reference of the speedups
+AGENTS = ("ppo", "stack4", "stack16", "helm")  # the paper's agents that are no memory (each has its config file)
+METHODS = (REFERENCE, *AGENTS)  # the full table
+EXTRA_METHODS = tuple(  # measured on request (--methods), beside GRU-PPO: the registry's other memories and variants
+    method
+    for spec in MEMORY_SPECS.values()
+    if not spec.stateless  # the memory-less agent is PPO, in the full table
+    for method in (spec.name, *spec.variants)
+    if method not in METHODS
+)
 DEFAULT_OUT = SCRATCH / "benchmarks" / "training.json"
 
 
@@ -104,7 +118,25 @@ def benchmark_config(args: argparse.Namespace, method: str = "gru") -> Config:
     ]
     if method == "helm":  # the CPU-sized random transformer: the paper's pretrained one is a download away
         overrides += [f"model.helm.lm={args.helm_lm}"]
-    return load_config(CONFIG_DIR / f"{method}.yaml", overrides)
+    path, memory = method_config(method)
+    return load_config(path, [*memory, *overrides])
+
+
+def method_config(method: str) -> tuple[Path, list[str]]:
+    """The config file of ``method`` and the overrides that make it that method: its own file, else (a memory of
+    the registry without one) GRU-PPO's file with ``model.memory`` set to it."""
+    path = CONFIG_DIR / f"{method}.yaml"
+    if path.is_file():
+        return path, []
+    if method not in MEMORY_SPECS:  # a variant's settings are in its file (gtrxl.yaml: model.trxl.gating)
+        raise FileNotFoundError(f"method {method!r} has no config file {path}")
+    return CONFIG_DIR / f"{REFERENCE}.yaml", [f"model.memory={method}"]
+
+
+def method_source(method: str) -> str:
+    """Where a method's config comes from, as the record says it: the file, and its override if any."""
+    path, memory = method_config(method)
+    return " ".join([str(path.relative_to(ROOT)), *(f"--set {item}" for item in memory)])
 
 
 def end_to_end(trainer: Trainer, updates: int) -> float:
@@ -335,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
             }
             per_method[method] = chosen
         for method, row in per_method.items():
-            for reference in ("ppo", "gru"):
+            for reference in ("ppo", REFERENCE):
                 if reference in per_method and reference != method:
                     row[f"over_{reference}"] = row["end_to_end"] / per_method[reference]["end_to_end"]
         batch = args.workers * args.worker_steps
@@ -349,8 +381,8 @@ def main(argv: list[str] | None = None) -> int:
         summary[how_name] = {
             "methods": per_method,
             "sb3_recurrent_ppo_steps_per_s": sb3_rate,
-            "gru_speedup_over_sb3": per_method["gru"]["end_to_end"] / sb3_rate
-            if sb3_rate and "gru" in per_method
+            f"{REFERENCE}_speedup_over_sb3": per_method[REFERENCE]["end_to_end"] / sb3_rate
+            if sb3_rate and REFERENCE in per_method
             else None,
         }
     record = {
@@ -364,7 +396,7 @@ def main(argv: list[str] | None = None) -> int:
             "minibatches": args.minibatches,
             "precision": args.precision,
             "device": args.device,
-            "methods": {m: f"configs/mortar_mayhem_b_grid/{m}.yaml" for m in methods},
+            "methods": {m: method_source(m) for m in methods},
             "helm_lm": args.helm_lm,
             "updates_per_round": args.updates,
         },
@@ -380,14 +412,14 @@ def main(argv: list[str] | None = None) -> int:
     target.save_json(record, record_partial(record), sort_keys=False)
 
     print(
-        f"\n{'method':10s}{'steps/s':>10s}{'best':>10s}{'/ PPO':>8s}{'/ GRU':>8s}"
+        f"\n{'method':10s}{'steps/s':>10s}{'best':>10s}{'/ PPO':>8s}{'/ ' + REFERENCE.upper():>8s}"
         f"{'bound':>8s}{'/ bound':>9s}{'rollout':>9s}{'acting':>8s}{'/ +acting':>11s}{'HELM':>7s}{'peak MiB':>10s}"
         f"{'memory B/step':>15s}"
     )
     median, best = summary["median"]["methods"], summary["best"]["methods"]  # type: ignore[index]
     for method in methods:
         m = median[method]
-        ratios = [f"{m[key]:8.2f}" if key in m else f"{'-':>8s}" for key in ("over_ppo", "over_gru")]
+        ratios = [f"{m[key]:8.2f}" if key in m else f"{'-':>8s}" for key in ("over_ppo", f"over_{REFERENCE}")]
         print(
             f"{method:10s}{m['end_to_end']:10.0f}{best[method]['end_to_end']:10.0f}{''.join(ratios)}"
             f"{m['bound']:8.0f}{m['end_to_end_over_bound']:9.2f}{m['rollout_share']:9.0%}{m['acting_share']:8.0%}"

@@ -57,16 +57,40 @@ def test_a_partial_run_never_replaces_a_full_table(tmp_path: Path, capsys: pytes
     assert full.read_bytes() == before and list(tmp_path.iterdir()) == [full]
 
 
+def test_the_methods_come_from_the_registry() -> None:
+    """The full table: GRU-PPO (the default memory) and the agents that are no memory; on request, every other memory
+    of the registry and its variants' method names, each from its config file or, without one, GRU-PPO's file with
+    model.memory set to it."""
+    assert benchmark_training.METHODS == ("gru", "ppo", "stack4", "stack16", "helm")
+    assert benchmark_training.EXTRA_METHODS == ("lstm", "trxl", "gtrxl", "lru", "ffm", "mamba", "mamba2")
+    config_dir = ROOT / "configs" / "mortar_mayhem_b_grid"
+    assert benchmark_training.method_config("gtrxl") == (config_dir / "gtrxl.yaml", [])
+    assert benchmark_training.method_config("lstm") == (config_dir / "gru.yaml", ["model.memory=lstm"])
+    assert benchmark_training.method_source("lstm") == "configs/mortar_mayhem_b_grid/gru.yaml --set model.memory=lstm"
+
+
+def test_bad_methods_are_named(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        benchmark_training.main(["--methods", "gru,rwkv", "--sb3", "no"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "unknown ['rwkv']; valid methods: gru, ppo, stack4, stack16, helm, lstm, trxl, gtrxl, lru, ffm" in err
+
+
 def test_benchmark_measures_transformer_xl_beside_gru(tmp_path: Path) -> None:
-    """--methods gru,trxl: TrXL (configs/mortar_mayhem_b_grid/trxl.yaml: 3 x 384, window 119) at GRU-PPO's batch,
-    with the bytes per step of each memory's records: the GRU's start state (512 floats), TrXL's layer inputs
-    (3 x 384 floats) once per step plus the 119-step windows carried into the rollout."""
+    """--methods gru,trxl,lstm: TrXL (configs/mortar_mayhem_b_grid/trxl.yaml: 3 x 384, window 119) at GRU-PPO's
+    batch, with the bytes per step of each memory's records: the GRU's start state (512 floats), TrXL's layer inputs
+    (3 x 384 floats) once per step plus the 119-step windows carried into the rollout; the LSTM, which has no file of
+    its own, runs GRU-PPO's with model.memory=lstm (its state: hidden and cell, 2 x 512 floats)."""
     out = tmp_path / "training.json"
     args = ["--env", "ProofOfMemory-v0", "--workers", "2", "--worker-steps", "16", "--epochs", "1"]
     args += ["--minibatches", "2", "--updates", "1", "--repeats", "1", "--precision", "fp32", "--threads", "1"]
-    args += ["--methods", "gru,trxl", "--sb3", "no", "--out", str(out)]
+    args += ["--methods", "gru,trxl,lstm", "--sb3", "no", "--out", str(out)]
     assert benchmark_training.main(args) == 0
-    methods = json.loads(out.read_text())["summary"]["median"]["methods"]
+    record = json.loads(out.read_text())
+    assert record["setting"]["methods"]["lstm"] == "configs/mortar_mayhem_b_grid/gru.yaml --set model.memory=lstm"
+    methods = record["summary"]["median"]["methods"]
     assert methods["gru"]["memory_bytes_per_step"] == 512 * 4
+    assert methods["lstm"]["memory_bytes_per_step"] == 2 * 512 * 4 and methods["lstm"]["over_gru"] > 0
     assert methods["trxl"]["memory_bytes_per_step"] == 3 * 384 * 4 * (16 + 119) // 16
     assert methods["trxl"]["end_to_end"] > 0 and methods["trxl"]["bound"] > 0 and methods["trxl"]["over_gru"] > 0
