@@ -101,7 +101,7 @@ def record_partial(record: dict) -> str:
     return partial_reasons(record["setting"]["methods"], "" if sb3 else "no SB3 RecurrentPPO")
 
 
-def benchmark_config(args: argparse.Namespace, method: str = "gru") -> Config:
+def benchmark_config(args: argparse.Namespace, method: str = REFERENCE) -> Config:
     batch = args.workers * args.worker_steps
     overrides = [
         f"env.id={args.env}",
