@@ -1,4 +1,4 @@
-"""The memory modules, one module per family, and their one registry (:data:`MEMORY_MODULES`).
+"""The memory modules, one file per memory family, and their one registry (:data:`MEMORY_SPECS`).
 
 A memory sits between the encoders and the body of :class:`agents.policy.models.ActorCritic`. The actor, the rollout
 buffer, the sequence batching and the PPO update only speak this interface (:class:`agents.memory.base.Memory`), so a
