@@ -35,7 +35,7 @@ def differences(produced: Path, reference: Path, produced_base: Path | None = No
     for name in COMPARED_FILES:
         new, old = (produced / name).read_bytes(), (reference / name).read_bytes()
         if new != old:
-            found.append(f"{name}: {_first_difference(new, old)}")
+            found.append(f"{name}: {first_difference(new, old)}")
     new_summary = json.loads((produced / "summary.json").read_text())
     old_summary = json.loads((reference / "summary.json").read_text())
     for summary, base in ((new_summary, produced_base or Path.cwd()), (old_summary, ROOT)):
@@ -50,7 +50,7 @@ def differences(produced: Path, reference: Path, produced_base: Path | None = No
     return found
 
 
-def _first_difference(new: bytes, old: bytes) -> str:
+def first_difference(new: bytes, old: bytes) -> str:
     """Where two files first differ: the line, and both versions of it."""
     new_lines, old_lines = new.decode(errors="replace").splitlines(), old.decode(errors="replace").splitlines()
     for number, (a, b) in enumerate(zip(new_lines, old_lines, strict=False), start=1):
