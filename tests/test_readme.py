@@ -51,6 +51,7 @@ def test_what_the_project_says_it_has_exists() -> None:
         raise AssertionError("a config with a grid was accepted by the trainer")
 
 
+@pytest.mark.slow
 def test_the_headless_notebook_command_writes_the_page(tmp_path: Path) -> None:
     """The first hour's nbconvert line runs as written (on the committed example results, into a temporary dir)."""
     import os

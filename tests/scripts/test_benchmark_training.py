@@ -13,6 +13,7 @@ from agents.runtime.io import ROOT, SCRATCH
 from scripts import benchmark_training
 
 
+@pytest.mark.slow
 def test_benchmark_writes_a_complete_record(tmp_path: Path) -> None:
     out = tmp_path / "training.json"
     args = ["--env", "ProofOfMemory-v0", "--workers", "2", "--worker-steps", "16", "--epochs", "1"]
@@ -77,6 +78,7 @@ def test_bad_methods_are_named(capsys: pytest.CaptureFixture) -> None:
     assert "unknown ['rwkv']; valid methods: gru, ppo, stack4, stack16, helm, lstm, trxl, gtrxl, lru, ffm" in err
 
 
+@pytest.mark.slow
 def test_benchmark_measures_transformer_xl_beside_gru(tmp_path: Path) -> None:
     """--methods gru,trxl,lstm: TrXL (configs/mortar_mayhem_b_grid/trxl.yaml: 3 x 384, window 119) at GRU-PPO's
     batch, with the bytes per step of each memory's records: the GRU's start state (512 floats), TrXL's layer inputs

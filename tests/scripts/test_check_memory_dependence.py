@@ -12,6 +12,7 @@ PANEL = Path(__file__).resolve().parents[2] / "configs" / "examples" / "proof_of
 SHORT = ["--set", "run.total_steps=12288", "--set", "eval.interval=6", "--set", "eval.repetitions=2"]
 
 
+@pytest.mark.slow
 def test_passes_when_memory_wins_and_fails_when_asked_the_other_way(tmp_path: Path, capsys) -> None:
     args = ["--config", str(PANEL), "--seeds", "1", "2", "--root", str(tmp_path), "--jobs", "2", *SHORT]
     assert check_memory_dependence.main(args) == 0

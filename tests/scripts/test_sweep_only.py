@@ -37,6 +37,7 @@ def _states(config: Path, root: Path) -> dict[str, str]:
     return {status.run.name: status.state for status in statuses(load_panel(config, root=root).runs)}
 
 
+@pytest.mark.slow
 def test_local_sweep_trains_only_the_selected_cells_and_evaluates_the_whole_panel(
     tmp_path: Path, capsys: pytest.CaptureFixture
 ) -> None:

@@ -48,6 +48,7 @@ def _snapshot(run_dir: Path) -> dict[str, tuple[int, str]]:
     }
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(torch.cuda.is_available(), reason="the failing run fails for want of CUDA")
 def test_local_sweep_end_to_end_with_evaluate(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     grid = {
@@ -119,6 +120,7 @@ def test_local_sweep_end_to_end_with_evaluate(tmp_path: Path, capsys: pytest.Cap
     assert summary_after["runs"] == [r for r in summary_before["runs"] if r["run"].startswith("two/ppo/")]
 
 
+@pytest.mark.slow
 def test_the_final_evaluation_keeps_and_ignores_a_users_own_evaluations(tmp_path: Path) -> None:
     """scripts/evaluate.py writes into <run>/evaluation by default: the sweep's final evaluation neither mistakes those
     records (other seeds) for its own nor is refused by them, and leaves them in place."""
@@ -139,6 +141,7 @@ def test_the_final_evaluation_keeps_and_ignores_a_users_own_evaluations(tmp_path
     assert [r for r in kept if r["seed"] >= 200_000] == mine
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_finishes_on_the_second_call(tmp_path: Path) -> None:
     grid = {"method": {"short": {"model.memory": "none"}, "long": {"run.total_steps": 30 * 64}}, "run.seed": [0]}
     config = _write(tmp_path / "kill.yaml", grid)
@@ -177,6 +180,7 @@ def _task_processes(controller: int) -> list[int]:
     return [int(pid) for pid in Path(f"/proc/{controller}/task/{controller}/children").read_text().split()]
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="finds the job's process through /proc")
 def test_slurm_launcher_through_submitit_requeues_and_resumes(tmp_path: Path) -> None:
     pytest.importorskip("submitit")

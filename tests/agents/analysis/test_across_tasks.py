@@ -50,6 +50,7 @@ def test_aggregates_and_their_intervals_match_rliable(name: str, statistic: str)
     assert_same_quantile(ours[2], theirs[:, 0], 0.975, REPS)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("x", "y"), [("3x4 uniform", "3x4 above one"), ("5x6 ties", "5x6 ties")])
 def test_probability_of_improvement_matches_rliable(x: str, y: str) -> None:
     sx, sy = MATRICES[x], MATRICES[y] if x != y else MATRICES[y][::-1] * 0.9
@@ -64,6 +65,7 @@ def test_probability_of_improvement_matches_rliable(x: str, y: str) -> None:
     assert aggregate.probability_of_improvement(sx, sx) == 0.5  # a method against itself
 
 
+@pytest.mark.slow
 def test_score_profile_matches_rliable() -> None:
     scores = MATRICES["3x4 uniform"]
     taus = np.linspace(0.0, 1.0, 11)

@@ -87,6 +87,7 @@ def test_bad_scores_are_refused() -> None:
         stats.interval_estimates({"a": np.zeros((2, 2))}, confidence=1.5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(matrices()))
 def test_bootstrap_distribution_matches_rliable(name: str) -> None:
     scores = matrices()[name]
@@ -100,6 +101,7 @@ def test_bootstrap_distribution_matches_rliable(name: str) -> None:
     assert np.std(ours) == pytest.approx(np.std(theirs), rel=0.06, abs=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(matrices()))
 def test_interval_estimates_match_rliable(name: str) -> None:
     scores = matrices()[name]
@@ -160,6 +162,7 @@ def test_curve_checkpoints_equal_matrix_estimates() -> None:
         np.testing.assert_allclose((point[k], low[k], high[k]), expected, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_curves_match_rliable_per_checkpoint() -> None:
     """rliable bootstraps a 3-d array cell by cell; its per-checkpoint marginals are ours."""
     rng = np.random.default_rng(12)

@@ -265,6 +265,7 @@ def test_episode_step_encodings_refuse_longer_episodes(encoding: str) -> None:
         memory.step(torch.randn(1, FEATURES), state, torch.tensor([17]))
 
 
+@pytest.mark.slow
 def test_a_20000_step_endless_episode_keeps_memory_bounded_and_equal_to_its_window() -> None:
     """20,000 steps of one episode: the state stays (memory_length, layers, dim); the last output is exactly what
     the training pass computes from the last memory_length records alone."""

@@ -312,6 +312,7 @@ def _run(command: list[str], fault: str = "") -> subprocess.CompletedProcess:
         "write:training.csv:1:rename:kill",
     ],
 )
+@pytest.mark.slow
 def test_a_run_killed_at_any_stage_of_a_write_resumes_bit_for_bit(tmp_path: Path, uninterrupted: Path, fault: str):
     run_dir = tmp_path / "run"
     killed = _run(_train_command(tmp_path, run_dir), fault)
@@ -325,6 +326,7 @@ def test_a_run_killed_at_any_stage_of_a_write_resumes_bit_for_bit(tmp_path: Path
     assert not [path for path in (run_dir / "checkpoints").iterdir() if path.suffix == ".damaged"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["SIGTERM", "SIGUSR2"])
 def test_a_preempted_run_checkpoints_exits_76_and_resumes_bit_for_bit(
     tmp_path: Path, uninterrupted: Path, name: str
@@ -338,6 +340,7 @@ def test_a_preempted_run_checkpoints_exits_76_and_resumes_bit_for_bit(
     _assert_same_run(uninterrupted, run_dir)
 
 
+@pytest.mark.slow
 def test_a_signal_in_the_middle_of_a_checkpoint_write_stops_after_it(tmp_path: Path, uninterrupted: Path) -> None:
     run_dir = tmp_path / "run"
     stopped = _run(_train_command(tmp_path, run_dir), "write:update_*.pt:2:data:sigterm")
@@ -349,6 +352,7 @@ def test_a_signal_in_the_middle_of_a_checkpoint_write_stops_after_it(tmp_path: P
     _assert_same_run(uninterrupted, run_dir)
 
 
+@pytest.mark.slow
 def test_sigterm_from_outside_stops_at_the_next_update(tmp_path: Path) -> None:
     run_dir = tmp_path / "run"
     command = _train_command(tmp_path, run_dir, total_steps=40 * 64, checkpoint_interval=0)
@@ -403,6 +407,7 @@ def _evaluate_command(run_dir: Path, out: Path) -> list[str]:
     return [sys.executable, str(ROOT / "scripts" / "evaluate.py"), "--run", str(run_dir), "--out", str(out)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("write", "runs"), [(1, {"seed0"}), (2, {"seed0", "seed1"})])
 def test_a_preempted_evaluation_leaves_its_files_whole_and_together(
     tmp_path: Path, two_runs: list[Path], write: int, runs: set[str]
@@ -421,6 +426,7 @@ def test_a_preempted_evaluation_leaves_its_files_whole_and_together(
     assert {record["run"] for record in read_records(out / "episodes.csv")} == runs
 
 
+@pytest.mark.slow
 def test_an_evaluation_killed_between_its_writes_is_refused_by_name(tmp_path: Path, two_runs: list[Path]) -> None:
     out = tmp_path / "out"
     evaluate_runs([two_runs[0]], out)

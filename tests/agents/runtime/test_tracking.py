@@ -116,6 +116,7 @@ def test_wandb_is_off_by_default_and_needs_no_install(tmp_path: Path, monkeypatc
         config_from_dict(TINY, ["run.wandb.mode=cloud"])
 
 
+@pytest.mark.slow
 def test_wandb_offline_mode_writes_one_local_run_that_a_resume_continues(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

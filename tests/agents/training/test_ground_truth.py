@@ -110,6 +110,7 @@ def test_an_environment_without_ground_truth_is_refused_naming_the_key(tmp_path:
     assert ground_truth_size(_config("MortarMayhem-Grid-v0", "ppo.ground_truth_coef=0"), None) == 0
 
 
+@pytest.mark.slow
 def test_training_lowers_the_ground_truth_loss_and_the_run_checkpoints_and_evaluates(tmp_path: Path) -> None:
     """10 updates on Endless Mortar Mayhem with the head alone weighted 1: the buffer holds each step's target, the
     loss is logged as losses/ground_truth_loss and falls (measured: 0.67 -> 0.08-0.15 over the 10 updates), the

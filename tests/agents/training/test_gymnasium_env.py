@@ -210,6 +210,7 @@ def _novel_seed_success(trainer: Trainer) -> list[dict]:
     return evaluate(trainer.model, None, config, seed_list(config.eval_seeds), config.eval.repetitions, sampling_seed=7)
 
 
+@pytest.mark.slow
 def test_gru_ppo_learns_the_tiny_env_and_is_evaluated_on_novel_seeds(tmp_path: Path) -> None:
     """Trained end to end (4k steps, ~3 s): GRU-PPO solves the cue task on novel seeds, which memory-less PPO cannot
     (chance: 0.5); the records carry the configured metric and the evaluation reproduces."""
@@ -253,6 +254,7 @@ def test_plots_label_and_scale_the_configured_metric(tmp_path: Path) -> None:
         ("env.make_kwargs.observation=image", "model.encoder=nature_cnn", "model.memory=none", *HELM),
     ],
 )
+@pytest.mark.slow
 def test_the_baselines_train_on_every_kind_of_space(tmp_path: Path, overrides: tuple[str, ...]) -> None:
     config = _config("run.total_steps=256", "run.worker_steps=16", "eval.interval=1", *overrides)
     trainer = Trainer(config, tmp_path / "run")
@@ -272,6 +274,7 @@ def test_every_memory_trains_on_a_gymnasium_environment(tmp_path: Path, memory: 
     assert len(history) == 2 and all(np.isfinite(m["losses/policy_loss"]) for m in history)
 
 
+@pytest.mark.slow
 def test_resume_starts_new_episodes_and_is_deterministic(tmp_path: Path) -> None:
     """A gymnasium environment's state is not in the checkpoint: a resumed run starts every slot on its next seed.
     Two resumes of the same checkpoint end with the same weights and logs."""

@@ -180,6 +180,7 @@ def test_the_blocks_get_the_state_in_fp32_under_bf16(name: str) -> None:
     assert seen == [torch.float32, torch.float32]
 
 
+@pytest.mark.slow
 def test_the_training_benchmark_measures_lru_at_its_default_precision(tmp_path: Path) -> None:
     """scripts/benchmark_training.py's default precision is bf16: the LRU (a complex recurrence) is measured at it,
     in a process of its own (configs/mortar_mayhem_b_grid/lru.yaml at a tiny batch)."""

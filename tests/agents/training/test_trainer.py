@@ -95,6 +95,7 @@ def _assert_same_weights(a: Trainer, b: Trainer) -> None:
         "gru-ground-truth",
     ],
 )
+@pytest.mark.slow
 def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overrides: tuple[str, ...]) -> None:
     """Killed after update 5 with checkpoints every 2: the resumed run ends with the same weights, TensorBoard
     points, training log and evaluation records as an uninterrupted one (nothing of update 5 survives twice)."""
@@ -102,6 +103,7 @@ def test_resume_gives_the_weights_of_an_uninterrupted_run(tmp_path: Path, overri
     _check_resume(tmp_path, _config(*overrides, *evaluation, "run.checkpoint_interval=2"))
 
 
+@pytest.mark.slow
 def test_resume_rebuilds_the_helm_memory_exactly(tmp_path: Path, dict_env: str) -> None:
     """The HELM branch's memory is rebuilt by replaying the slots' episodes (of different lengths here)."""
     evaluation = ("eval.interval=3", "eval.seeds=[100000, 100002]", "eval.repetitions=2")
@@ -178,6 +180,7 @@ def test_training_csv_gets_a_row_per_update_while_the_run_goes_on(tmp_path: Path
     assert [row["step"] for row in _rows(path)] == [str(64 * u) for u in range(1, 7)]
 
 
+@pytest.mark.slow
 def test_an_extended_run_resumes_exactly_and_its_schedules_go_on_from_final(tmp_path: Path) -> None:
     """A finished 3-update run lengthened to 6: killed right after the extension (its newest checkpoint still says
     3 updates) and again after update 5, it ends as the same extension run uninterrupted: weights, training.csv,
