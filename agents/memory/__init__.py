@@ -55,12 +55,9 @@ import importlib
 import pkgutil
 from collections.abc import Callable
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from agents.memory.base import Memory, MemorySpec
-
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
+from agents.memory.base import Memory, MemorySpec, ModelSettings
 
 
 def _memory_files() -> list[ModuleType]:
@@ -96,7 +93,7 @@ _MODULES = _memory_files()
 MEMORY_SPECS: dict[str, MemorySpec] = _collect(_MODULES)
 
 # name -> builder(model config, input size), as the model builds its memory.
-MEMORY_MODULES: dict[str, Callable[[ModelConfig, int], Memory]] = {
+MEMORY_MODULES: dict[str, Callable[[ModelSettings, int], Memory]] = {
     name: spec.builder for name, spec in MEMORY_SPECS.items()
 }
 
@@ -127,7 +124,7 @@ def memory_class(path: str) -> type[Memory]:
     return target
 
 
-def build_memory(config: ModelConfig, input_size: int) -> Memory:
+def build_memory(config: ModelSettings, input_size: int) -> Memory:
     """The memory of a model config: a registered name, or a class by import path."""
     if ":" in config.memory:
         return memory_class(config.memory)(input_size, config, **config.memory_options)
@@ -154,6 +151,7 @@ __all__ = [
     "MEMORY_SPECS",
     "Memory",
     "MemorySpec",
+    "ModelSettings",
     "build_memory",
     "memory_class",
     "memory_spec",

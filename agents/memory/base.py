@@ -7,15 +7,26 @@ import dataclasses
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import torch
 from torch import Tensor, nn
 
 from agents.settings import Settings
 
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
+
+class ModelSettings(Protocol):
+    """What a memory's builder reads of the model config (``agents.config.ModelConfig``, on the floor above, which the
+    memory floor never imports): the shared sizes and, as the attribute named after it (``config.lru``), a memory's
+    own settings block."""
+
+    memory: str
+    memory_size: int
+    memory_layers: int
+    memory_options: dict[str, Any]
+
+    def __getattr__(self, name: str) -> Any: ...
+
 
 DEFAULT_ORDER = 1000  # the built-in memories take the places 0..70; a memory that names none comes after them
 NAME_PATTERN = re.compile(r"[a-z][a-z0-9_]*")  # a YAML key and a method name: model.memory: <name>, model.<name>
@@ -102,9 +113,9 @@ class MemorySpec:
     name: str
     label: str
     colour: str
-    builder: Callable[[ModelConfig, int], Memory]
+    builder: Callable[[ModelSettings, int], Memory]
     settings: type[Settings] | None = None
-    check: Callable[[ModelConfig, str], None] | None = None
+    check: Callable[[ModelSettings, str], None] | None = None
     variants: Mapping[str, str] = field(default_factory=dict)
     stateless: bool = False
     order: int = DEFAULT_ORDER

@@ -14,18 +14,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 
 from agents.layers import orthogonal
-from agents.memory.base import MemorySpec
+from agents.memory.base import MemorySpec, ModelSettings
 from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
 from agents.settings import Settings, param
-
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
 
 __all__ = ["FFM", "FfmConfig"]  # agents.memory exports them too
 
@@ -83,7 +79,7 @@ class FFM(ScanMemory):
         super().__init__(input_size, dim, [FFMBlock(dim, config) for _ in range(layers)])
 
 
-def build(config: ModelConfig, input_size: int) -> FFM:
+def build(config: ModelSettings, input_size: int) -> FFM:
     """``model.memory_layers`` FFM blocks of width ``model.memory_size``, with the block ``model.ffm``."""
     return FFM(config.ffm, input_size, config.memory_size, config.memory_layers)
 

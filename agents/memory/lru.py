@@ -12,19 +12,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import orthogonal
-from agents.memory.base import MemorySpec
+from agents.memory.base import MemorySpec, ModelSettings
 from agents.memory.scan import Layout, ScanMemory, complex_dtype, full_precision, widen
 from agents.settings import ConfigError, Settings, param
-
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
 
 __all__ = ["LRU", "LruConfig"]  # agents.memory exports them too
 
@@ -111,7 +107,7 @@ class LRU(ScanMemory):
         super().__init__(input_size, dim, [LRUBlock(dim, states, config) for _ in range(layers)])
 
 
-def build(config: ModelConfig, input_size: int) -> LRU:
+def build(config: ModelSettings, input_size: int) -> LRU:
     """``model.memory_layers`` LRU blocks of width ``model.memory_size``, with the block ``model.lru``."""
     return LRU(config.lru, input_size, config.memory_size, config.memory_layers)
 

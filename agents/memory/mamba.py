@@ -19,20 +19,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import orthogonal
-from agents.memory.base import MemorySpec
+from agents.memory.base import MemorySpec, ModelSettings
 from agents.memory.scan import Layout, ScanMemory, full_precision, widen
 from agents.memory.ssm import causal_conv, check_step_sizes
 from agents.settings import Settings, param
-
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
 
 __all__ = ["Mamba", "MambaConfig"]  # agents.memory exports them too
 
@@ -110,7 +106,7 @@ class Mamba(ScanMemory):
         super().__init__(input_size, dim, [MambaBlock(dim, config) for _ in range(layers)])
 
 
-def build(config: ModelConfig, input_size: int) -> Mamba:
+def build(config: ModelSettings, input_size: int) -> Mamba:
     """``model.memory_layers`` Mamba blocks of width ``model.memory_size``, with the block ``model.mamba``."""
     return Mamba(config.mamba, input_size, config.memory_size, config.memory_layers)
 

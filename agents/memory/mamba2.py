@@ -24,20 +24,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import orthogonal
-from agents.memory.base import MemorySpec
+from agents.memory.base import MemorySpec, ModelSettings
 from agents.memory.scan import Layout, ScanMemory, full_precision, linear_scan, widen
 from agents.memory.ssm import causal_conv, check_step_sizes
 from agents.settings import ConfigError, Settings, param
-
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
 
 __all__ = ["Mamba2", "Mamba2Config"]  # agents.memory exports them too
 
@@ -150,12 +146,12 @@ class Mamba2(ScanMemory):
         super().__init__(input_size, dim, [Mamba2Block(dim, config) for _ in range(layers)])
 
 
-def build(config: ModelConfig, input_size: int) -> Mamba2:
+def build(config: ModelSettings, input_size: int) -> Mamba2:
     """``model.memory_layers`` Mamba-2 blocks of width ``model.memory_size``, with the block ``model.mamba2``."""
     return Mamba2(config.mamba2, input_size, config.memory_size, config.memory_layers)
 
 
-def check_heads(config: ModelConfig, prefix: str) -> None:
+def check_heads(config: ModelSettings, prefix: str) -> None:
     """The heads split the inner width: ``head_dim`` must divide ``expand x memory_size`` (a check of the model block
     and this memory's together, run when ``model.memory`` is mamba2)."""
     inner = config.mamba2.expand * config.memory_size

@@ -6,18 +6,13 @@ The state is one tensor per slot, zeros at an episode start; the buffer keeps th
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import torch
 from torch import Tensor, nn
 from torch.nn.utils.rnn import PackedSequence
 
 from agents.layers import HIDDEN_GAIN, compute_dtype, orthogonal
-from agents.memory.base import Memory, MemorySpec
+from agents.memory.base import Memory, MemorySpec, ModelSettings
 from agents.memory.packed_gru import packed_gru
-
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
 
 __all__ = ["NoMemory", "RecurrentMemory"]  # agents.memory exports them too
 
@@ -111,17 +106,17 @@ class RecurrentMemory(Memory):
         return torch.stack((hidden.transpose(0, 1), cell.transpose(0, 1)), dim=1)
 
 
-def build_none(config: ModelConfig, input_size: int) -> NoMemory:
+def build_none(config: ModelSettings, input_size: int) -> NoMemory:
     """No memory: the features pass through."""
     return NoMemory(input_size)
 
 
-def build_gru(config: ModelConfig, input_size: int) -> RecurrentMemory:
+def build_gru(config: ModelSettings, input_size: int) -> RecurrentMemory:
     """A GRU of ``model.memory_layers`` layers of ``model.memory_size`` units."""
     return RecurrentMemory("gru", input_size, config.memory_size, config.memory_layers)
 
 
-def build_lstm(config: ModelConfig, input_size: int) -> RecurrentMemory:
+def build_lstm(config: ModelSettings, input_size: int) -> RecurrentMemory:
     """An LSTM of ``model.memory_layers`` layers of ``model.memory_size`` units."""
     return RecurrentMemory("lstm", input_size, config.memory_size, config.memory_layers)
 

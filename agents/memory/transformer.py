@@ -42,18 +42,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
 from agents.layers import HIDDEN_GAIN, compute_dtype, orthogonal
-from agents.memory.base import Memory, MemorySpec
+from agents.memory.base import Memory, MemorySpec, ModelSettings
 from agents.settings import ConfigError, Settings, check_choice, param
-
-if TYPE_CHECKING:  # a builder receives the model config; the config is the floor above
-    from agents.config import ModelConfig
 
 __all__ = ["TransformerXL", "TrxlConfig"]  # agents.memory exports them too
 
@@ -433,7 +429,7 @@ class TransformerXL(Memory):
         return h
 
 
-def build(config: ModelConfig, input_size: int) -> TransformerXL:
+def build(config: ModelSettings, input_size: int) -> TransformerXL:
     """The Transformer-XL of the block ``model.trxl`` (its own width and depth; ``memory_size`` is not read)."""
     return TransformerXL(config.trxl, input_size)
 

@@ -2,8 +2,9 @@
 from a higher floor to a lower one, no module of agents/ over 600 lines, and every room's face documented.
 
 The import graph is read with ``ast``: every ``import`` and ``from ... import`` at any depth (inside functions too),
-relative imports resolved, ``from package import module`` taken as an import of the module; imports under
-``if TYPE_CHECKING:`` are never executed and are left out (type hints only)."""
+relative imports resolved, ``from package import module`` taken as an import of the module, and imports under
+``if TYPE_CHECKING:`` too: never executed, but a type hint is a dependency all the same (the memory floor names the
+model config by a protocol of its own, :class:`agents.memory.base.ModelSettings`, not by importing it)."""
 
 from __future__ import annotations
 
@@ -46,31 +47,13 @@ def module_names(root: Path = ROOT) -> dict[str, Path]:
     return found
 
 
-def _type_checking_nodes(tree: ast.AST) -> set[int]:
-    """The ids of the nodes under ``if TYPE_CHECKING:`` (never executed)."""
-    skipped = set()
-    for node in ast.walk(tree):
-        test = getattr(node, "test", None)
-        if isinstance(node, ast.If) and (
-            isinstance(test, ast.Name)
-            and test.id == "TYPE_CHECKING"
-            or isinstance(test, ast.Attribute)
-            and test.attr == "TYPE_CHECKING"
-        ):
-            skipped |= {id(inner) for statement in node.body for inner in ast.walk(statement)}
-    return skipped
-
-
 def imports_of(name: str, path: Path, modules: Iterable[str]) -> set[str]:
     """The modules of ``modules`` that module ``name`` (at ``path``) imports, at any depth."""
     known = set(modules)
     tree = ast.parse(path.read_text(), str(path))
-    skipped = _type_checking_nodes(tree)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found = set()
     for node in ast.walk(tree):
-        if id(node) in skipped:
-            continue
         if isinstance(node, ast.Import):
             found |= {alias.name for alias in node.names}
         elif isinstance(node, ast.ImportFrom):
@@ -242,9 +225,12 @@ def test_the_graph_finds_a_circle_through_a_function_level_and_a_relative_import
     )
     graph = import_graph(root)
     assert graph["agents.memory.registry"] == {"agents.config.schema"}
-    assert graph["agents.memory.lru"] == set(), "an import for type hints only is no arrow"
+    assert graph["agents.memory.lru"] == {"agents.config.schema"}, "an import for type hints is an arrow too"
     assert cycles(graph) == [["agents.config.schema", "agents.memory.registry", "agents.config.schema"]]
-    assert upward_imports(graph) == ["agents.memory.registry (agents.memory) -> agents.config.schema (agents.config)"]
+    assert upward_imports(graph) == [
+        "agents.memory.lru (agents.memory) -> agents.config.schema (agents.config)",
+        "agents.memory.registry (agents.memory) -> agents.config.schema (agents.config)",
+    ]
 
 
 def test_siblings_and_the_map_may_not_import(tmp_path: Path) -> None:
