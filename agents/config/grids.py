@@ -16,6 +16,9 @@
   A bundle sets ``run.method`` / ``run.task`` to its name (the names in records and plots), then its own keys.
 * ``panel:`` names the panel (default: the file's stem); ``slurm:`` holds the cluster settings of the sweep
   (:class:`SlurmConfig`).
+* ``exclude:`` leaves cells out of the product: a list of mappings from axes to a label or a list of labels; a point
+  that matches every key of one entry is not a run (``exclude: [{method: trxl_recon, task: [endless_mp]}]``: the
+  reconstruction variant on the other tasks only).
 
 Override order, lowest first: the base file (everything outside ``grid``) < the bundles, axis by axis in the order
 the file lists the named axes (a bundle's keys in its own order) < the plain axes, in file order < command-line
@@ -39,8 +42,8 @@ from agents.config.schema import Config, SlurmConfig, check_cross_fields
 from agents.settings import ConfigError, deep_copy
 
 NAMED_AXES = ("method", "task")  # axes whose values are named bundles; a bundle sets run.<axis> to its name
-PANEL, SLURM = "panel", "slurm"
-GRID_SETTINGS = (PANEL, SLURM)  # grid keys that are not axes
+PANEL, SLURM, EXCLUDE = "panel", "slurm", "exclude"
+GRID_SETTINGS = (PANEL, SLURM, EXCLUDE)  # grid keys that are not axes
 RESERVED_NAMES = ("results", "slurm")  # sub-directories of a panel's directory that runs cannot take
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+=-]*\Z")
 
@@ -85,8 +88,12 @@ def expand_grid(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> list[G
         grid_slurm(grid)
     grid_panel(grid)
     axes = _grid_axes(grid, base)
+    excluded = _exclusions(grid.get(EXCLUDE), axes)
     points = []
     for combination in itertools.product(*(options for _, options in axes)):
+        labels = {axis: label for (axis, _), (label, _) in zip(axes, combination, strict=True)}
+        if any(all(labels.get(axis) in names for axis, names in entry.items()) for entry in excluded):
+            continue
         tree = deep_copy(base)
         applied = []
         for (axis, _), (label, sets) in zip(axes, combination, strict=True):
@@ -109,6 +116,34 @@ def expand_grid(raw: Mapping[str, Any], overrides: Iterable[str] = ()) -> list[G
             raise ConfigError(f"grid point ({where}) is invalid: {err} [{sets}]") from err
         points.append(GridPoint(choices, tuple(applied), config))
     return points
+
+
+def _exclusions(raw: Any, axes: list[tuple[str, list[tuple[str, list]]]]) -> list[dict[str, set[str]]]:
+    """``grid.exclude`` checked against the axes: per entry, axis -> the labels it leaves out."""
+    if raw is None:
+        return []
+    labels = {axis: [label for label, _ in options] for axis, options in axes}
+    if not isinstance(raw, list) or not all(isinstance(entry, Mapping) and entry for entry in raw):
+        raise ConfigError(f"grid.exclude={raw!r} is invalid: expected a list of mappings axis -> label(s)")
+    entries = []
+    for index, entry in enumerate(raw):
+        found = {}
+        for axis, value in entry.items():
+            axis = str(axis)
+            if axis not in labels:
+                raise ConfigError(f"grid.exclude[{index}]: {axis!r} is not an axis; the axes: {', '.join(labels)}")
+            names = {
+                _flow(item) if not isinstance(item, str) else item
+                for item in (value if isinstance(value, list) else [value])
+            }
+            unknown = sorted(names - set(labels[axis]))
+            if unknown:
+                raise ConfigError(
+                    f"grid.exclude[{index}]: {axis} has no {', '.join(unknown)}; its labels: {', '.join(labels[axis])}"
+                )
+            found[axis] = names
+        entries.append(found)
+    return entries
 
 
 def grid_panel(grid: Mapping[str, Any]) -> str | None:

@@ -358,3 +358,24 @@ def test_the_loader_calls_a_blocks_check_with_its_dotted_key() -> None:
     assert seen == [("model.probe", 2)]
     with pytest.raises(ConfigError, match=r"^model\.probe\.size=3 is refused by the block itself$"):
         build(Probe, {"size": 3}, prefix="model.probe")
+
+
+def test_a_grid_excludes_the_cells_its_exclude_entries_match() -> None:
+    raw = {
+        "grid": {
+            "method": {"gru": {"model.memory": "gru"}, "recon": {"ppo.reconstruction_coef": 0.1}},
+            "task": {"a": {"env.options": {"delay": 2}}, "b": {"env.options": {"delay": 3}}},
+            "run.seed": [0, 1],
+            "exclude": [{"method": "recon", "task": ["b"]}, {"method": "gru", "run.seed": 1}],
+        },
+        "env": {"id": "ProofOfMemory-v0"},
+    }
+    cells = {(p.choice("method"), p.choice("task"), p.choice("run.seed")) for p in expand_grid(raw)}
+    assert cells == {("gru", "a", "0"), ("gru", "b", "0"), ("recon", "a", "0"), ("recon", "a", "1")}
+    for exclude, message in (
+        ([{"methd": "gru"}], "'methd' is not an axis; the axes: method, task, run.seed"),
+        ([{"task": ["c"]}], "task has no c; its labels: a, b"),
+        ({"method": "gru"}, "expected a list of mappings"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            expand_grid({**raw, "grid": {**raw["grid"], "exclude": exclude}})
