@@ -1,0 +1,136 @@
+"""The results table of an evaluated panel: ``python scripts/results_table.py results/cpu/suite/results``.
+
+Reads the panel's ``summary.json`` (written by ``sweep.py --evaluate``) and prints Markdown: one row per method, one
+column per task with the IQM of the final novel-seed metric and its 95% stratified-bootstrap interval (the last
+evaluated step of that method on that task; the runs counted where fewer than the task's most), and for a panel of
+several tasks the aggregate across them (IQM of the normalised scores with its interval, and the probability of
+improvement over the reference, GRU-PPO). A second table gives each run's wall time from ``run_info.json`` (start to
+finish; a run resumed after an interruption is marked, its figure includes the pause). ``--out FILE`` also writes
+both tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections import defaultdict
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from agents.analysis.metrics import metric_of
+from agents.analysis.plots import method_colors, method_label
+from agents.runtime.io import atomic_write_text
+
+
+def _interval(point: float, low: float, high: float, digits: int) -> str:
+    return f"{point:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+
+
+def _method_order(methods: set[str]) -> list[str]:
+    return list(method_colors(methods))  # the figures' legend order
+
+
+def final_scores(summary: dict[str, Any]) -> dict[str, dict[str, dict[str, Any]]]:
+    """task -> method -> the ``aggregate`` entry of the method's last evaluated step on the task."""
+    finals: dict[str, dict[str, dict[str, Any]]] = defaultdict(dict)
+    for entry in summary["aggregate"]:
+        known = finals[entry["task"]].get(entry["method"])
+        if known is None or entry["step"] > known["step"]:
+            finals[entry["task"]][entry["method"]] = entry
+    return dict(finals)
+
+
+def scores_table(summary: dict[str, Any], digits: int = 2) -> str:
+    finals = final_scores(summary)
+    tasks = sorted(finals)
+    env_ids = {run["task"]: run["env_id"] for run in summary["runs"]}
+    spanning = summary.get("across_tasks") or {}
+    aggregates = spanning.get("methods") or {}
+    reference = spanning.get("reference", "gru")
+    methods = _method_order({method for found in finals.values() for method in found})
+    most = {task: max(entry["runs"] for entry in finals[task].values()) for task in tasks}
+    header = [f"{task} ({metric_of(env_ids[task]).name.replace('_', ' ')})" for task in tasks]
+    if aggregates:
+        header += ["across tasks: IQM (normalised)", f"P(better than {method_label(reference)})"]
+    lines = ["| method | " + " | ".join(header) + " |", "|---" * (len(header) + 1) + "|"]
+    for method in methods:
+        cells = []
+        for task in tasks:
+            entry = finals[task].get(method)
+            if entry is None:
+                cells.append("")
+                continue
+            cell = _interval(entry["iqm"], entry["low"], entry["high"], digits)
+            if entry["runs"] < most[task]:
+                cell += f" ({entry['runs']} runs)"
+            cells.append(cell)
+        if aggregates:
+            found = aggregates.get(method)
+            cells.append(_interval(*found["iqm"], digits) if found else "")
+            improvement = found.get(f"improvement_over_{reference}") if found else None
+            cells.append(_interval(*improvement, digits) if improvement else "")
+        lines.append(f"| {method_label(method)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run_minutes(run_dir: Path) -> tuple[float, bool] | None:
+    """(minutes from start to finish, whether the run was resumed) of a finished run, else None."""
+    info_path = run_dir / "run_info.json"
+    if not info_path.is_file():
+        return None
+    info = json.loads(info_path.read_text())
+    if not info.get("finished"):
+        return None
+    minutes = (datetime.fromisoformat(info["finished"]["time"]) - datetime.fromisoformat(info["time"])).total_seconds()
+    log = run_dir / "stdout.log"
+    resumed = log.is_file() and "resuming from update" in log.read_text()
+    return minutes / 60, resumed
+
+
+def wall_time_table(summary: dict[str, Any], root: Path) -> str:
+    """Per method and task: the fastest and slowest run's minutes and the number of runs."""
+    times: dict[tuple[str, str], list[tuple[float, bool]]] = defaultdict(list)
+    named = {run["run"]: (run["method"], run["task"]) for run in summary["runs"]}  # one entry per run and step
+    for name, key in named.items():
+        found = run_minutes(root / name)
+        if found is not None:
+            times[key].append(found)
+    tasks = sorted({task for _, task in times})
+    lines = ["| method | " + " | ".join(tasks) + " |", "|---" * (len(tasks) + 1) + "|"]
+    total = 0.0
+    for method in _method_order({method for method, _ in times}):
+        cells = []
+        for task in tasks:
+            found = times.get((method, task), [])
+            total += sum(minutes for minutes, _ in found)
+            if not found:
+                cells.append("")
+                continue
+            low, high = min(m for m, _ in found), max(m for m, _ in found)
+            span = f"{low:.0f}" if round(low) == round(high) else f"{low:.0f}-{high:.0f}"
+            resumed = sum(r for _, r in found)
+            cells.append(f"{span} ({len(found)})" + (f", {resumed} resumed" if resumed else ""))
+        lines.append(f"| {method_label(method)} | " + " | ".join(cells) + " |")
+    lines.append(f"\nMinutes per run, start to finish (runs). All runs: {total / 60:.1f} run-hours.")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("results", type=Path, help="a panel's results directory, e.g. results/cpu/suite/results")
+    parser.add_argument("--digits", type=int, default=2, help="decimals of the scores (default 2)")
+    parser.add_argument("--out", type=Path, help="also write the tables to this file")
+    args = parser.parse_args(argv)
+    path = args.results / "summary.json"
+    if not path.is_file():
+        print(f"error: {path} not found: evaluate the panel first (sweep.py CONFIG --evaluate)", file=sys.stderr)
+        return 2
+    summary = json.loads(path.read_text())
+    root = args.results.resolve().parent.parent  # <root>/<panel>/results; the runs are named from <root>
+    text = scores_table(summary, args.digits) + "\n" + wall_time_table(summary, root)
+    print(text, end="")
+    if args.out is not None:
+        atomic_write_text(args.out, text)
+    return 0

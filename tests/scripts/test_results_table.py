@@ -1,0 +1,51 @@
+"""scripts/results_table.py: the README's table of a panel (final IQMs per method and task, the aggregate) and the
+runs' wall times, read from summary.json and the run directories."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from scripts import results_table
+
+
+def _entry(method: str, task: str, step: int, iqm: float, runs: int = 2) -> dict:
+    return {"method": method, "task": task, "step": step, "iqm": iqm, "low": iqm - 0.1, "high": iqm + 0.1, "runs": runs}
+
+
+def _run(root: Path, method: str, task: str, seed: int, minutes: int, resumed: bool = False) -> dict:
+    run = root / "suite" / method / task / f"seed{seed}"
+    run.mkdir(parents=True)
+    info = {"time": "2026-11-29T00:00:00+00:00", "finished": {"time": f"2026-11-29T00:{minutes:02d}:00+00:00"}}
+    (run / "run_info.json").write_text(json.dumps(info))
+    (run / "stdout.log").write_text("resuming from update 5 of 10\n" if resumed else "training 10 updates\n")
+    env_id = {"cue": "ProofOfMemory-v0", "emp": "Endless-MysteryPath-v0"}[task]
+    return {"run": f"suite/{method}/{task}/seed{seed}", "method": method, "task": task, "env_id": env_id}
+
+
+def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_path: Path, capsys) -> None:
+    runs = [_run(tmp_path, "ppo", task, seed, 10 + seed) for task in ("cue", "emp") for seed in (0, 1)]
+    runs += runs[:1]  # a run is listed once per evaluated step
+    runs += [_run(tmp_path, "gru", "cue", 0, 20, resumed=True), _run(tmp_path, "gru", "cue", 1, 20)]
+    runs += [_run(tmp_path, "gru", "emp", 0, 40)]
+    aggregate = [_entry("ppo", "cue", 100, 0.1), _entry("ppo", "cue", 200, 0.5), _entry("ppo", "emp", 200, 2.25)]
+    aggregate += [_entry("gru", "cue", 200, 0.9), _entry("gru", "emp", 200, 3.0, runs=1)]
+    methods = {
+        "ppo": {"iqm": [0.2, 0.1, 0.3], "improvement_over_gru": [0.25, 0.0, 0.5]},
+        "gru": {"iqm": [0.8, 0.7, 0.9]},
+    }
+    summary = {"runs": runs, "aggregate": aggregate, "across_tasks": {"reference": "gru", "methods": methods}}
+    results = tmp_path / "suite" / "results"
+    results.mkdir()
+    (results / "summary.json").write_text(json.dumps(summary))
+    assert results_table.main([str(results), "--out", str(tmp_path / "table.md")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == (
+        "| method | cue (success) | emp (tiles visited) | across tasks: IQM (normalised) | P(better than GRU-PPO) |"
+    )
+    assert lines[2] == "| PPO | 0.50 [0.40, 0.60] | 2.25 [2.15, 2.35] | 0.20 [0.10, 0.30] | 0.25 [0.00, 0.50] |"
+    assert lines[3] == "| GRU-PPO | 0.90 [0.80, 1.00] | 3.00 [2.90, 3.10] (1 runs) | 0.80 [0.70, 0.90] |  |"
+    assert "| PPO | 10-11 (2) | 10-11 (2) |" in lines and "| GRU-PPO | 20 (2), 1 resumed | 40 (1) |" in lines
+    assert lines[-1] == "Minutes per run, start to finish (runs). All runs: 2.0 run-hours."
+    assert (tmp_path / "table.md").read_text().splitlines() == lines
+    assert results_table.main([str(tmp_path / "none")]) == 2
