@@ -5,7 +5,8 @@ the last update, or none yet), ``finished`` (the newest checkpoint is the last u
 holds the run's lock). A run directory whose saved config differs from the expanded one is an error naming the run
 and the keys (:class:`~agents.experiments.planning.SweepError`); nothing is overwritten. ``run.torch_threads`` is the
 one exception: left at 0 (automatic) by the config, the launcher fixes it when it creates the run (the cores' share
-of a local job, the CPUs of a SLURM job), it is saved in config.yaml, and the run keeps it when it resumes. The
+of a local job, the CPUs of a SLURM job), it is saved in config.yaml, and the run keeps it when it resumes; a
+grid that sets it explicitly must match it, except for a finished run, which trains no more. The
 settings no record depends on (progress bar, checkpoint interval and count, W&B:
 :func:`agents.config.resume_may_change`, the rule of every resume) may differ too: a run that goes on takes the grid's
 (:func:`prepare_run` writes them to its config.yaml).
@@ -49,18 +50,20 @@ class RunStatus:
 def run_status(run: SweepRun) -> RunStatus:
     """The state of one run; :class:`SweepError` when its directory holds a different config."""
     saved = _saved_config(run)
+    latest = latest_checkpoint(run.run_dir) if run.run_dir.is_dir() else None
+    update = checkpoint_update(latest) if latest is not None else 0
+    if latest is None and saved is not None:  # a finished run whose checkpoints are gone (e.g. a committed copy)
+        update = finished_update(run.run_dir) or 0
     if saved is not None:
-        differences = config_differences(saved, run.config)
+        # A finished run trains no more: what changes only the rounding of training (the thread count) is no
+        # difference for it, so a panel trained at different thread counts can be evaluated with an explicit one.
+        differences = config_differences(saved, run.config, rounding=update >= run.config.num_updates)
         if differences:
             raise SweepError(
                 f"{run.name}: {run.run_dir / 'config.yaml'} holds a different config than the grid makes now ("
                 + "; ".join(differences)
                 + "): restore the grid, or move that run directory away to train it anew"
             )
-    latest = latest_checkpoint(run.run_dir) if run.run_dir.is_dir() else None
-    update = checkpoint_update(latest) if latest is not None else 0
-    if latest is None and saved is not None:  # a finished run whose checkpoints are gone (e.g. a committed copy)
-        update = finished_update(run.run_dir) or 0
     if saved is None:
         if latest is not None:
             raise SweepError(f"{run.name}: {run.run_dir} holds checkpoints but no config.yaml; move it away")
@@ -86,9 +89,10 @@ def statuses(runs: Sequence[SweepRun]) -> list[RunStatus]:
     return found
 
 
-def config_differences(saved: Config, expanded: Config) -> list[str]:
+def config_differences(saved: Config, expanded: Config, rounding: bool = False) -> list[str]:
     """``key: saved X, now Y`` for every field that differs (``run.torch_threads`` only when the grid sets it), but
-    the settings no record depends on, which a run that goes on takes from the grid (:func:`prepare_run`)."""
+    the settings no record depends on, which a run that goes on takes from the grid (:func:`prepare_run`), and with
+    ``rounding`` (a finished run) those that change only the rounding (:data:`agents.config.ROUNDING_ONLY`)."""
     old, new = _flatten(config_to_dict(saved)), _flatten(config_to_dict(expanded))
     if expanded.run.torch_threads == 0:
         old.pop("run.torch_threads", None)
@@ -98,7 +102,8 @@ def config_differences(saved: Config, expanded: Config) -> list[str]:
     return [
         f"{key}: saved {_show(old.get(key, missing))}, now {_show(new.get(key, missing))}"
         for key in keys
-        if old.get(key, missing) != new.get(key, missing) and not resume_may_change(key, lengthen=False, rounding=False)
+        if old.get(key, missing) != new.get(key, missing)
+        and not resume_may_change(key, lengthen=False, rounding=rounding)
     ]
 
 
