@@ -4,8 +4,9 @@ Re-trains one run of a grid config (the one ``--only`` selects, with the sweep's
 ``method=lru,task=mm_grid_1,seed=0``) from scratch in a temporary root, with the committed run's thread count, and
 evaluates its last checkpoint as the sweep does; then compares its records with the committed run's under ``--root``
 byte for byte: ``training.csv``, ``eval/episodes.csv`` (the in-training evaluations) and ``evaluation/episodes.csv``
-(the final one), and its resolved config with the committed ``config.yaml``. For example, the regression check of the
-CPU suite (``results/cpu/suite/README.md``)::
+(the final one), and its resolved config with the committed ``config.yaml`` (parsed: keys added to the config
+since, at their defaults, and the settings no record depends on are no difference). For example, the regression
+check of the CPU suite (``results/cpu/suite/README.md``)::
 
     python scripts/check_run.py configs/cpu/suite.yaml --root results/cpu --only method=lru,task=mm_grid_1,seed=0
 
@@ -28,6 +29,8 @@ from agents.analysis.compare import first_difference
 from agents.cli.sweep import main as sweep
 from agents.config import ConfigError
 from agents.experiments.planning import SweepError, load_panel, select_runs
+from agents.experiments.state import config_differences
+from agents.policy.checkpoint import run_config
 
 RECORDS = ("training.csv", "eval/episodes.csv", "evaluation/episodes.csv")  # compared byte for byte
 
@@ -63,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: the sweep failed (exit status {code})", file=sys.stderr)
             return 2
         fresh = scratch / committed.relative_to(args.root)
-        found = _differences(fresh, committed, saved)
+        found = _differences(fresh, committed)
         for line in found:
             print(line)
         print(f"{fresh} {'differs from' if found else 'is the same as'} {committed}")
@@ -75,11 +78,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"the re-trained run is kept in {scratch}")
 
 
-def _differences(fresh: Path, committed: Path, saved: dict) -> list[str]:
+def _differences(fresh: Path, committed: Path) -> list[str]:
     """What differs between the re-trained run and the committed one, one entry per file."""
     found = []
-    if yaml.safe_load((fresh / "config.yaml").read_text()) != saved:
-        found.append("config.yaml: the resolved configs differ")
+    # Parsed, so that keys added since the run (at their defaults) and settings no record depends on (W&B, progress
+    # bar, checkpoint counts) are no difference
+    differences = config_differences(run_config(committed), run_config(fresh))
+    if differences:
+        found.append(f"config.yaml: the resolved configs differ: {'; '.join(differences)}")
     for name in RECORDS:
         new, old = (fresh / name).read_bytes(), (committed / name).read_bytes()
         if new != old:

@@ -30,6 +30,17 @@ def test_a_committed_run_regenerates_and_a_changed_byte_is_named(tmp_path: Path,
     assert check_run.main([str(config), *only]) == 0
     assert "is the same as" in capsys.readouterr().out
     run = next((root / "tiny").glob("gru/*/seed0"))
+    saved = yaml.safe_load((run / "config.yaml").read_text())  # as an older version wrote it: a key added since
+    del saved["ppo"]["ground_truth_coef"]  # missing, and W&B's mode (no record depends on it) another
+    saved["run"]["wandb"]["mode"] = "online"
+    (run / "config.yaml").write_text(yaml.safe_dump(saved))
+    assert check_run.main([str(config), *only[:4], "--scratch", str(tmp_path / "older")]) == 0
+    saved["ppo"]["gamma"] = 0.5
+    (run / "config.yaml").write_text(yaml.safe_dump(saved))
+    assert check_run.main([str(config), *only[:4], "--scratch", str(tmp_path / "other")]) == 1
+    assert "ppo.gamma: saved 0.5, now 0.99" in capsys.readouterr().out
+    del saved["ppo"]["gamma"]
+    (run / "config.yaml").write_text(yaml.safe_dump(saved))
     log = run / "training.csv"
     log.write_text(log.read_text().replace(",", ";", 1))
     assert check_run.main([str(config), *only[:4], "--scratch", str(tmp_path / "third")]) == 1
