@@ -2,7 +2,7 @@
 
 Reads the panel's ``summary.json`` (written by ``sweep.py --evaluate``) and prints Markdown: one row per method, one
 column per task with the IQM of the final novel-seed metric and its 95% stratified-bootstrap interval (the last
-evaluated step of that method on that task; the runs counted where fewer than the task's most), and for a panel of
+evaluated step of that method on that task; the runs counted where fewer than the panel's most), and for a panel of
 several tasks the aggregate across them (IQM of the normalised scores with its interval, and the probability of
 improvement over the reference, GRU-PPO). A second table gives each run's wall time from ``run_info.json`` (start to
 finish; a run resumed after an interruption is marked, its figure includes the pause). ``--out FILE`` also writes
@@ -33,9 +33,12 @@ def _method_order(methods: set[str]) -> list[str]:
 
 
 def final_scores(summary: dict[str, Any]) -> dict[str, dict[str, dict[str, Any]]]:
-    """task -> method -> the ``aggregate`` entry of the method's last evaluated step on the task."""
+    """task -> method -> the ``aggregate`` entry of the method's last evaluated step on the task (not the rows of
+    task ``all``, which pool a method's tasks)."""
     finals: dict[str, dict[str, dict[str, Any]]] = defaultdict(dict)
     for entry in summary["aggregate"]:
+        if entry["task"] == "all":
+            continue
         known = finals[entry["task"]].get(entry["method"])
         if known is None or entry["step"] > known["step"]:
             finals[entry["task"]][entry["method"]] = entry
@@ -50,7 +53,7 @@ def scores_table(summary: dict[str, Any], digits: int = 2) -> str:
     aggregates = spanning.get("methods") or {}
     reference = spanning.get("reference", "gru")
     methods = _method_order({method for found in finals.values() for method in found})
-    most = {task: max(entry["runs"] for entry in finals[task].values()) for task in tasks}
+    most = max(entry["runs"] for found in finals.values() for entry in found.values())  # the panel's seeds, or more
     header = [f"{task} ({metric_of(env_ids[task]).name.replace('_', ' ')})" for task in tasks]
     if aggregates:
         header += ["across tasks: IQM (normalised)", f"P(better than {method_label(reference)})"]
@@ -63,8 +66,8 @@ def scores_table(summary: dict[str, Any], digits: int = 2) -> str:
                 cells.append("")
                 continue
             cell = _interval(entry["iqm"], entry["low"], entry["high"], digits)
-            if entry["runs"] < most[task]:
-                cell += f" ({entry['runs']} runs)"
+            if entry["runs"] < most:  # an interval over fewer runs (over one run, a point)
+                cell += f" ({entry['runs']} run{'' if entry['runs'] == 1 else 's'})"
             cells.append(cell)
         if aggregates:
             found = aggregates.get(method)

@@ -30,6 +30,7 @@ def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_
     runs += [_run(tmp_path, "gru", "emp", 0, 40)]
     aggregate = [_entry("ppo", "cue", 100, 0.1), _entry("ppo", "cue", 200, 0.5), _entry("ppo", "emp", 200, 2.25)]
     aggregate += [_entry("gru", "cue", 200, 0.9), _entry("gru", "emp", 200, 3.0, runs=1)]
+    aggregate += [_entry("ppo", "all", 200, 1.0, runs=4)]  # a method's tasks pooled: no column of its own
     methods = {
         "ppo": {"iqm": [0.2, 0.1, 0.3], "improvement_over_gru": [0.25, 0.0, 0.5]},
         "gru": {"iqm": [0.8, 0.7, 0.9]},
@@ -44,7 +45,7 @@ def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_
         "| method | cue (success) | emp (tiles visited) | across tasks: IQM (normalised) | P(better than GRU-PPO) |"
     )
     assert lines[2] == "| PPO | 0.50 [0.40, 0.60] | 2.25 [2.15, 2.35] | 0.20 [0.10, 0.30] | 0.25 [0.00, 0.50] |"
-    assert lines[3] == "| GRU-PPO | 0.90 [0.80, 1.00] | 3.00 [2.90, 3.10] (1 runs) | 0.80 [0.70, 0.90] |  |"
+    assert lines[3] == "| GRU-PPO | 0.90 [0.80, 1.00] | 3.00 [2.90, 3.10] (1 run) | 0.80 [0.70, 0.90] |  |"
     assert "| PPO | 10-11 (2) | 10-11 (2) |" in lines and "| GRU-PPO | 20 (2), 1 resumed | 40 (1) |" in lines
     assert lines[-1] == "Minutes per run, start to finish (runs). All runs: 2.0 run-hours."
     assert (tmp_path / "table.md").read_text().splitlines() == lines
