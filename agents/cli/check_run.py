@@ -1,14 +1,14 @@
 """Check that a committed run regenerates: ``python scripts/check_run.py CONFIG --root ROOT --only SELECTION``.
 
 Re-trains one run of a grid config (the one ``--only`` selects, with the sweep's syntax, e.g.
-``method=lru,task=mm_grid_1,seed=0``) from scratch in a temporary root, with the committed run's thread count, and
+``method=ppo,task=endless_mp,seed=0``) from scratch in a temporary root, with the committed run's thread count, and
 evaluates its last checkpoint as the sweep does; then compares its records with the committed run's under ``--root``
 byte for byte: ``training.csv``, ``eval/episodes.csv`` (the in-training evaluations) and ``evaluation/episodes.csv``
 (the final one), and its resolved config with the committed ``config.yaml`` (parsed: keys added to the config
 since, at their defaults, and the settings no record depends on are no difference). For example, the regression
 check of the CPU suite (``results/cpu/suite/README.md``)::
 
-    python scripts/check_run.py configs/cpu/suite.yaml --root results/cpu --only method=lru,task=mm_grid_1,seed=0
+    python scripts/check_run.py configs/cpu/suite.yaml --root results/cpu --only method=ppo,task=endless_mp,seed=0
 
 The same code on the same machine gives the same bytes; another machine or PyTorch build may round differently (the
 first differing line is printed). ``--keep`` leaves the temporary root. Exit status: 0 the same, 1 a difference, 2 bad
