@@ -88,12 +88,13 @@ SUFFIX_LABELS = {  # auxiliary losses that configs name as <method>_<suffix> (tr
     "gt": "GT",  # ground-truth estimation (ppo.ground_truth_coef)
 }
 STEPS_LABEL = "Environment steps (millions)"
+LEGEND_ENTRY_WIDTH = 1.75  # inches per legend column ("TrXL-PPO + recon." with its line), so a legend fits its figure
 BAND_ALPHA = 0.2
 RANGE_PAD = 0.03  # a fixed range is padded by this fraction, so that a curve at 0 or 1 stays visible
 CHANCE_STYLE = {"color": "0.3", "linestyle": "--", "linewidth": 1.0, "zorder": 1.5}
 CHANCE_LABEL = "chance"
 TITLE_WIDTH = 52  # characters per line of a curves panel's title (4.6 inches wide)
-FINAL_TITLE_WIDTH = 40  # and of a final-performance panel's (4.2 inches, with the method labels beside it)
+FINAL_TITLE_WIDTH = 32  # and of a final-performance panel's (its axes take ~2.7 of its 4.2 inches)
 
 
 @functools.cache
@@ -389,7 +390,7 @@ def _legend(figure: Figure, colors: dict[str, str], confidence: float = 0.95, ch
     figure.legend(
         handles=handles,
         loc="outside upper center",
-        ncols=max(1, min(len(handles), 7)),
+        ncols=max(1, min(len(handles), int(figure.get_figwidth() // LEGEND_ENTRY_WIDTH))),
         frameon=False,
         title=f"IQM across runs, {confidence:.0%} stratified-bootstrap CI",
         title_fontsize=9,

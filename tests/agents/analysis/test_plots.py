@@ -287,7 +287,7 @@ def test_chance_lines_where_the_table_knows_them(with_options: results.Results) 
         assert np.allclose(line.get_xdata(), level)
         assert axes.get_xlim() == pytest.approx((-plots.RANGE_PAD, 1 + plots.RANGE_PAD))
         assert [label.get_text() for label in axes.get_yticklabels()] == ["PPO", "GRU-PPO"]
-    assert final.axes[0].get_title().startswith("MortarMayhem-Grid-v0, command_count=1")
+    assert final.axes[0].get_title().replace("\n", " ").startswith("MortarMayhem-Grid-v0, command_count=1")
     # options unknown (older records): ProofOfMemory's chance does not depend on them, Mortar Mayhem's does
     unknown = with_options.episodes.select(np.ones(len(with_options.episodes), dtype=bool))
     unknown.columns["env_options"] = np.full(len(unknown), "")
@@ -320,7 +320,7 @@ def test_plot_results_finds_the_options_of_older_records_in_the_saved_configs(tm
     options = results.task_options(loaded.episodes, [committed])
     figure = plots.final_figure(loaded.episodes, reps=50, options=options)
     (axes,) = figure.axes
-    assert axes.get_title().startswith("MortarMayhem-Grid-v0, command_count=1")
+    assert axes.get_title().replace("\n", " ").startswith("MortarMayhem-Grid-v0, command_count=1")
     assert np.allclose(chance_lines(axes)[0].get_xdata(), 0.2)
     assert [label.get_text() for label in axes.get_yticklabels()] == [
         "PPO",
