@@ -14,7 +14,6 @@ import csv
 import json
 import sys
 from collections import defaultdict
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +21,7 @@ import numpy as np
 import yaml
 
 from agents.analysis.metrics import metric_of
+from agents.cli.results_table import run_minutes
 from agents.runtime.io import atomic_write_text
 
 
@@ -66,10 +66,8 @@ def probe_rows(panel_dir: Path) -> list[dict[str, Any]]:
                 logged = list(csv.DictReader(handle))
             steps = int(logged[-1]["step"]) if logged else 0
         finished = info.get("finished")
-        minutes = None
-        if finished and info.get("time"):
-            start, end = (datetime.fromisoformat(info["time"]), datetime.fromisoformat(finished["time"]))
-            minutes = (end - start).total_seconds() / 60
+        timed = run_minutes(run)
+        minutes = None if timed is None else timed[0]
         rows.append(
             {
                 "task": run.parent.name,
