@@ -284,11 +284,16 @@ def across_tasks(
     confidence: float = 0.95,
     seed: int = 0,
     options: Mapping[str, Mapping[str, Any] | None] | None = None,
+    in_progress: Mapping[str, str] | None = None,
 ) -> dict[str, Any] | None:
     """The aggregate across the tasks of a panel (None for fewer than two tasks): every run's final score (its last
     checkpoint) normalised per task by :func:`task_bounds`, then per method that has the same number of runs on every
     normalisable task :func:`method_aggregates` (IQM, mean, median, optimality gap with intervals, the probability of
-    improvement over ``reference`` and the run-score distribution). Methods left out are listed with the reason."""
+    improvement over ``reference`` and the run-score distribution). Methods left out are listed with the reason.
+
+    ``in_progress``: task -> why (e.g. "1 of 15 runs finished"): tasks whose runs are still being trained stay out
+    of the aggregate (listed as ``tasks_in_progress``), so that a suite filled in over several sessions keeps the
+    aggregate of its finished tasks rather than dropping every method that has not reached the new task yet."""
     env_ids = {str(task): str(env) for task, env in zip(episodes["task"], episodes["env_id"], strict=True)}
     if len(env_ids) < 2:
         return None
@@ -299,7 +304,8 @@ def across_tasks(
         for task, scores in zip(found.tasks, found.columns, strict=True):
             finals[task][method] = scores[:, 0]
     bounds = task_bounds(finals, env_ids, options, floor_method)
-    tasks = [task for task in finals if bounds[task]["normalised"]]
+    in_progress = {task: why for task, why in (in_progress or {}).items() if task in finals}
+    tasks = [task for task in finals if bounds[task]["normalised"] and task not in in_progress]
     normalised: dict[str, np.ndarray] = {}
     left_out: dict[str, str] = {}
     for method in sorted(matrices):
@@ -319,6 +325,7 @@ def across_tasks(
         "bounds": bounds,
         "reference": reference,
         "left_out": left_out,
+        "tasks_in_progress": in_progress,
         "statistics": "per method over its runs x tasks of normalised final scores; [point, low, high]",
         "interval": f"stratified bootstrap over runs within each task, percentile, {confidence:.0%}, {reps} reps",
     }

@@ -7,6 +7,7 @@ bands. Method colours and labels are those of every other figure (:mod:`agents.a
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -74,8 +75,11 @@ def across_tasks_figure(summary: Mapping[str, Any], colors: Mapping[str, str] | 
     axes.grid(alpha=0.3)
     axes.legend(fontsize=8, loc="upper right")
     tasks = ", ".join(summary["tasks"])
+    waiting = summary.get("tasks_in_progress") or {}
+    left = f"\n(left out while their runs train: {', '.join(sorted(waiting))})" if waiting else ""
     figure.suptitle(
-        f"Across {len(summary['tasks'])} tasks ({tasks}): final scores normalised per task; {summary['interval']}",
+        f"Across {len(summary['tasks'])} tasks ({tasks}): final scores normalised per task; {summary['interval']}"
+        + left,
         fontsize=10,
     )
     return figure
@@ -85,9 +89,24 @@ def plot_across_tasks(
     directories: Sequence[str | Path], out: str | Path, column: str = "metric", reps: int = 2000, seed: int = 0
 ) -> list[Path]:
     """``across_tasks.png/.pdf`` in ``out`` for the records of ``directories`` when they hold two tasks or more and
-    at least one method can be aggregated across them; otherwise nothing. Returns the paths written."""
+    at least one method can be aggregated across them; otherwise nothing. The tasks a directory's ``summary.json``
+    names in progress stay out, as in that summary. Returns the paths written."""
     episodes = read_episodes(*directories)
-    summary = across_tasks(episodes, column, reps=reps, seed=seed, options=task_options(episodes, directories))
+    in_progress = _tasks_in_progress(directories)
+    summary = across_tasks(
+        episodes, column, reps=reps, seed=seed, options=task_options(episodes, directories), in_progress=in_progress
+    )
     if summary is None or not summary["methods"]:
         return []
     return save_figure(across_tasks_figure(summary), Path(out) / "across_tasks")
+
+
+def _tasks_in_progress(directories: Sequence[str | Path]) -> dict[str, str]:
+    """The ``across_tasks.tasks_in_progress`` of the directories' ``summary.json`` (a panel's results), merged."""
+    found: dict[str, str] = {}
+    for directory in directories:
+        path = Path(directory) / "summary.json"
+        if path.is_file():
+            spanning = json.loads(path.read_text()).get("across_tasks") or {}
+            found.update(spanning.get("tasks_in_progress") or {})
+    return found

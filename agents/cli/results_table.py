@@ -3,10 +3,10 @@
 Reads the panel's ``summary.json`` (written by ``sweep.py --evaluate``) and prints Markdown: one row per method, one
 column per task with the IQM of the final novel-seed metric and its 95% stratified-bootstrap interval (the last
 evaluated step of that method on that task; the runs counted where fewer than the panel's most), and for a panel of
-several tasks the aggregate across them (IQM of the normalised scores with its interval, and the probability of
-improvement over the reference, GRU-PPO). A second table gives each run's wall time from ``run_info.json`` (start to
-finish; a run resumed after an interruption is marked, its figure includes the pause). ``--out FILE`` also writes
-both tables.
+several tasks the aggregate across the tasks whose runs have all finished (IQM of the normalised scores with its
+interval, and the probability of improvement over the reference, GRU-PPO). A second table gives each run's wall
+time from ``run_info.json`` (start to finish; a run resumed after an interruption is marked, its figure includes the
+pause). ``--out FILE`` also writes both tables.
 """
 
 from __future__ import annotations
@@ -56,7 +56,9 @@ def scores_table(summary: dict[str, Any], digits: int = 2) -> str:
     most = max(entry["runs"] for found in finals.values() for entry in found.values())  # the panel's seeds, or more
     header = [f"{task} ({metric_of(env_ids[task]).name.replace('_', ' ')})" for task in tasks]
     if aggregates:
-        header += ["across tasks: IQM (normalised)", f"P(better than {method_label(reference)})"]
+        # while a task's runs train it is out of the aggregate: the column names the tasks it covers
+        across = f"across {', '.join(spanning['tasks'])}" if spanning.get("tasks_in_progress") else "across tasks"
+        header += [f"{across}: IQM (normalised)", f"P(better than {method_label(reference)})"]
     lines = ["| method | " + " | ".join(header) + " |", "|---" * (len(header) + 1) + "|"]
     for method in methods:
         cells = []

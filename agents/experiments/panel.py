@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.experiments.planning import Echo, Panel, SweepError, SweepRun
-from agents.experiments.state import FINISHED, statuses
+from agents.experiments.state import FINISHED, RunStatus, statuses
 from agents.policy.checkpoint import checkpoint_update, finished_update, latest_checkpoint
 from agents.runtime.io import atomic_write_text, provenance, write_json_atomic
 
@@ -110,7 +110,7 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
             **provenance(),
         },
     }
-    spanning = across_tasks(episodes)  # None for a panel of one task
+    spanning = across_tasks(episodes, in_progress=tasks_in_progress(found))  # None for a panel of one task
     if spanning is not None:
         summary["across_tasks"] = spanning
     write_json_atomic(out / "summary.json", summary, sort_keys=False)
@@ -120,6 +120,17 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
         echo(f"{panel.name}: {len(unfinished)} run(s) not finished and left out: {', '.join(unfinished)}")
     echo(f"{panel.name}: results in {out}")
     return out
+
+
+def tasks_in_progress(found: Sequence[RunStatus]) -> dict[str, str]:
+    """Task -> "k of n runs finished" for every task of the panel with a run not finished yet."""
+    total: dict[str, int] = {}
+    done: dict[str, int] = {}
+    for status in found:
+        task = status.run.config.task
+        total[task] = total.get(task, 0) + 1
+        done[task] = done.get(task, 0) + (status.state == FINISHED)
+    return {task: f"{done[task]} of {total[task]} runs finished" for task in total if done[task] < total[task]}
 
 
 def _plot(results_dir: Path, echo: Echo) -> None:

@@ -50,3 +50,15 @@ def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_
     assert lines[-1] == "Minutes per run, start to finish (runs). All runs: 2.0 run-hours."
     assert (tmp_path / "table.md").read_text().splitlines() == lines
     assert results_table.main([str(tmp_path / "none")]) == 2
+
+
+def test_the_aggregate_column_names_its_tasks_while_one_is_in_progress(tmp_path: Path, capsys) -> None:
+    runs = [_run(tmp_path, method, task, 0, 10) for method in ("ppo", "gru") for task in ("cue", "emp")]
+    aggregate = [_entry(method, task, 200, 0.5, runs=1) for method in ("ppo", "gru") for task in ("cue", "emp")]
+    spanning = {"reference": "gru", "methods": {"gru": {"iqm": [0.8, 0.7, 0.9]}}, "tasks": ["cue"]}
+    spanning["tasks_in_progress"] = {"emp": "1 of 3 runs finished"}
+    results = tmp_path / "suite" / "results"
+    results.mkdir()
+    (results / "summary.json").write_text(json.dumps({"runs": runs, "aggregate": aggregate, "across_tasks": spanning}))
+    assert results_table.main([str(results)]) == 0
+    assert "| across cue: IQM (normalised) |" in capsys.readouterr().out.splitlines()[0]

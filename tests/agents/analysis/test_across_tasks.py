@@ -155,6 +155,26 @@ def test_a_panel_is_normalised_per_task_and_aggregated_per_method() -> None:
     assert aggregate.across_tasks(one_task) is None
 
 
+def test_a_task_in_progress_stays_out_of_the_aggregate() -> None:
+    """A third task with one method's run so far would leave every method out; named in progress, it is set aside
+    and the aggregate of the finished tasks is the same as without it."""
+    tasks = {"cue": "ProofOfMemory-v0", "endless": "Endless-MysteryPath-v0"}
+    options = {"cue": {}, "endless": {}, "late": {}}
+    finished = _panel({"ppo": 0.5, "gru": 1.0, "lru": 0.75}, tasks)
+    late = _panel({"lru": 1.0}, {"late": "ProofOfMemory-v0"}, runs=1)
+    records = Records({name: np.concatenate([finished[name], late[name]]) for name in finished.columns})
+    without = aggregate.across_tasks(finished, reps=100, options=options)
+    assert aggregate.across_tasks(records, reps=100, options=options)["methods"] == {}  # every method left out
+    summary = aggregate.across_tasks(records, reps=100, options=options, in_progress={"late": "1 of 9 runs finished"})
+    assert summary["tasks"] == ["cue", "endless"] and summary["tasks_in_progress"] == {"late": "1 of 9 runs finished"}
+    assert summary["methods"] == without["methods"] and summary["left_out"] == {}
+    assert "late" in summary["bounds"]  # still normalisable, only set aside
+    from agents.analysis.across_tasks_figure import across_tasks_figure
+
+    title = across_tasks_figure(summary)._suptitle.get_text()
+    assert title.startswith("Across 2 tasks (cue, endless)") and "left out while their runs train: late" in title
+
+
 def test_the_figure_shows_every_aggregate(tmp_path) -> None:
     from agents.analysis.across_tasks_figure import across_tasks_figure
     from agents.analysis.plots import save_figure
@@ -169,3 +189,20 @@ def test_the_figure_shows_every_aggregate(tmp_path) -> None:
     assert any(title.startswith("Performance profiles") for title in titles)
     (png, _) = save_figure(figure, tmp_path / "across_tasks")
     assert png.stat().st_size > 10_000
+
+
+def test_the_figure_leaves_out_the_tasks_a_summary_names_in_progress(tmp_path) -> None:
+    import json
+
+    from agents.analysis.across_tasks_figure import plot_across_tasks
+    from tests.support.synthetic_results import write_results
+
+    tasks = {"cue": "ProofOfMemory-v0", "grid": "MortarMayhem-Grid-v0"}
+    results = write_results(tmp_path / "results", methods=("ppo", "gru"), tasks=tasks, training=False)
+    assert [path.name for path in plot_across_tasks([results], tmp_path / "all")] == [
+        "across_tasks.png",
+        "across_tasks.pdf",
+    ]
+    summary = {"across_tasks": {"tasks_in_progress": {"grid": "2 of 6 runs finished"}}}
+    (results / "summary.json").write_text(json.dumps(summary))
+    assert plot_across_tasks([results], tmp_path / "one") == []  # one finished task: nothing to aggregate

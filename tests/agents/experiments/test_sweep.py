@@ -298,3 +298,21 @@ def test_dry_run_prints_the_runs_steps_disk_and_states(tmp_path: Path, capsys: p
     prepare_run(panel.runs[0])
     assert "runs: 0 finished, 1 partial, 24 new, 0 running" in describe([panel])
     assert sweep_script.main([str(config), "--dry-run", "--set", "ppo.gamma=2"]) == 2
+
+
+def test_tasks_in_progress_counts_each_tasks_finished_runs(tmp_path: Path) -> None:
+    from agents.experiments.panel import tasks_in_progress
+    from agents.experiments.state import RunStatus
+
+    panel = panel_from_dict(
+        {
+            "env": {"id": "ProofOfMemory-v0"},
+            "grid": {"panel": "p", "task": {"a": {}, "b": {"env.options": {"delay": 2}}}, "run.seed": [0, 1]},
+        },
+        root=tmp_path,
+    )
+    found = [
+        RunStatus(run, FINISHED if "/a/" in run.name or run.name.endswith("b/seed0") else NEW, 0) for run in panel.runs
+    ]
+    assert tasks_in_progress(found) == {"b": "1 of 2 runs finished"}
+    assert tasks_in_progress([RunStatus(run, FINISHED, 0) for run in panel.runs]) == {}
