@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import io
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -124,13 +125,9 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
 
 def tasks_in_progress(found: Sequence[RunStatus]) -> dict[str, str]:
     """Task -> "k of n runs finished" for every task of the panel with a run not finished yet."""
-    total: dict[str, int] = {}
-    done: dict[str, int] = {}
-    for status in found:
-        task = status.run.config.task
-        total[task] = total.get(task, 0) + 1
-        done[task] = done.get(task, 0) + (status.state == FINISHED)
-    return {task: f"{done[task]} of {total[task]} runs finished" for task in total if done[task] < total[task]}
+    total = Counter(status.run.config.task for status in found)
+    done = Counter(status.run.config.task for status in found if status.state == FINISHED)
+    return {task: f"{done[task]} of {count} runs finished" for task, count in total.items() if done[task] < count}
 
 
 def _plot(results_dir: Path, echo: Echo) -> None:
