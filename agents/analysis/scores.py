@@ -151,13 +151,17 @@ def _method_scores(scores: Records, method: str, steps: Steps, label: str) -> Me
                 int(np.flatnonzero((rows["run"] == run) & (rows["step"] == s))[0])
                 for run, s in zip(names, last, strict=True)
             ]
+            # Tasks may have different budgets; only runs of one task ending apart are worth a word.
+            ends = np.unique(last)
+            if len(ends) > 1:
+                warn(
+                    f"{label}, task {task!r}: runs end at different steps ({', '.join(map(str, ends))}); each run's "
+                    "last is taken"
+                )
             runs.append(tuple(names.tolist()))
             columns.append(rows["score"][picked][:, None])
             at.append(np.asarray(last, dtype=np.int64)[:, None])
             counts.append(rows["episodes"][picked][:, None])
-        ends = np.unique(np.concatenate(at))
-        if len(ends) > 1:
-            warn(f"{label}: runs end at different steps ({', '.join(map(str, ends))}); each run's last is taken")
         return MethodScores(method, tasks, tuple(runs), tuple(at), tuple(columns), tuple(counts))
     shared = _shared_steps(scores, label)
     if len(shared) == 0:

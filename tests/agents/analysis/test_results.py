@@ -8,6 +8,7 @@ import os
 import re
 import subprocess
 import sys
+import warnings
 from collections import defaultdict
 from pathlib import Path
 
@@ -226,13 +227,27 @@ def test_different_checkpoints_use_shared_steps_with_a_warning(tmp_path: Path) -
         aggregated = scoring.aggregate(episodes, reps=100)
     assert [row["step"] for row in aggregated] == [8192, 24576]
     assert all(row["runs"] == 3 for row in aggregated)
-    with pytest.warns(ResultsWarning, match="runs end at different steps \\(24576, 32768\\)"):
+    with pytest.warns(ResultsWarning, match="task 'ProofOfMemory-v0': runs end at different steps \\(24576, 32768\\)"):
         last = scoring.aggregate(episodes, steps="last", reps=100)
     assert last[0]["step"] == 32768 and last[0]["runs"] == 3
     with pytest.warns(ResultsWarning, match="have no episodes at some of the step"):
         scoring.aggregate(episodes, steps=[16384], reps=100)
     with pytest.raises(ValueError, match="no episodes at step\\(s\\) 5"):
         scoring.aggregate(episodes, steps=5)
+
+
+def test_tasks_with_different_budgets_take_each_last_without_a_warning(tmp_path: Path) -> None:
+    # A suite's tasks may train for different step counts: that is no mismatch, and each task's last counts.
+    rows = episode_rows(methods=("gru",), runs=3)
+    rows += [{**row, "step": 32768} for row in rows if row["task"] == "ProofOfMemory-v0" and row["step"] == 24576]
+    write_csv(tmp_path / "r" / "episodes.csv", rows, EPISODE_COLUMNS)
+    episodes = results.read_episodes(tmp_path / "r")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ResultsWarning)
+        matrices = scoring.score_matrices(episodes, "last")
+    gru = matrices["gru"]
+    ends = {task: set(at.ravel().tolist()) for task, at in zip(gru.tasks, gru.steps, strict=True)}
+    assert ends == {"ProofOfMemory-v0": {32768}, "MortarMayhem-Grid-v0": {24576}}
 
 
 def test_ragged_tasks_aggregate_but_refuse_a_matrix(tmp_path: Path) -> None:
