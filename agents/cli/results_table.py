@@ -5,8 +5,8 @@ column per task with the IQM of the final novel-seed metric and its 95% stratifi
 evaluated step of that method on that task; the runs counted where fewer than the panel's most), and for a panel of
 several tasks the aggregate across the tasks whose runs have all finished (IQM of the normalised scores with its
 interval, and the probability of improvement over the reference, GRU-PPO). A second table gives each run's wall
-time from ``run_info.json`` (start to finish; a run resumed after an interruption is marked, its figure includes the
-pause). ``--out FILE`` also writes both tables.
+time from ``run_info.json`` and its TensorBoard event files: start to finish, less the pauses of a run stopped and
+resumed (marked; each of its processes ends at the last event it logged). ``--out FILE`` also writes both tables.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import json
 import sys
 from collections import defaultdict
 from datetime import datetime
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -81,17 +82,37 @@ def scores_table(summary: dict[str, Any], digits: int = 2) -> str:
 
 
 def run_minutes(run_dir: Path) -> tuple[float, bool] | None:
-    """(minutes from start to finish, whether the run was resumed) of a finished run, else None."""
+    """(minutes the run trained, whether it was resumed) of a finished run, else None.
+
+    A run's processes start at ``run_info.json``'s ``time`` and at each ``resumed`` time; the last ends at
+    ``finished``, every earlier one at the last event it wrote to the run's TensorBoard files (a process that wrote
+    none counts nothing), so the hours between a stop and the resume are left out."""
     info_path = run_dir / "run_info.json"
     if not info_path.is_file():
         return None
     info = json.loads(info_path.read_text())
     if not info.get("finished"):
         return None
-    minutes = (datetime.fromisoformat(info["finished"]["time"]) - datetime.fromisoformat(info["time"])).total_seconds()
-    log = run_dir / "stdout.log"
-    resumed = log.is_file() and "resuming from update" in log.read_text()
-    return minutes / 60, resumed
+    starts = [_seconds(info["time"])] + [_seconds(entry["time"]) for entry in info.get("resumed", [])]
+    logged = event_wall_times(run_dir) if len(starts) > 1 else []
+    ends = [max((t for t in logged if start <= t < stop), default=start) for start, stop in pairwise(starts)]
+    ends.append(_seconds(info["finished"]["time"]))
+    return sum(end - start for start, end in zip(starts, ends, strict=True)) / 60, len(starts) > 1
+
+
+def _seconds(iso_time: str) -> float:
+    return datetime.fromisoformat(iso_time).timestamp()
+
+
+def event_wall_times(run_dir: Path) -> list[float]:
+    """The wall times (Unix seconds) of every event in ``run_dir``'s TensorBoard files."""
+    from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
+
+    return [
+        event.wall_time
+        for path in sorted(run_dir.glob("events.out.tfevents.*"))
+        for event in EventFileLoader(str(path)).Load()
+    ]
 
 
 def wall_time_table(summary: dict[str, Any], root: Path) -> str:
@@ -118,7 +139,10 @@ def wall_time_table(summary: dict[str, Any], root: Path) -> str:
             resumed = sum(r for _, r in found)
             cells.append(f"{span} ({len(found)})" + (f", {resumed} resumed" if resumed else ""))
         lines.append(f"| {method_label(method)} | " + " | ".join(cells) + " |")
-    lines.append(f"\nMinutes per run, start to finish (runs). All runs: {total / 60:.1f} run-hours.")
+    lines.append(
+        f"\nMinutes per run, start to finish less the pauses of resumed runs (runs). All runs: {total / 60:.1f}"
+        " run-hours."
+    )
     return "\n".join(lines) + "\n"
 
 

@@ -4,8 +4,10 @@ runs' wall times, read from summary.json and the run directories."""
 from __future__ import annotations
 
 import json
+from datetime import datetime
 from pathlib import Path
 
+from agents.cli.results_table import run_minutes
 from scripts import results_table
 
 
@@ -14,13 +16,44 @@ def _entry(method: str, task: str, step: int, iqm: float, runs: int = 2) -> dict
 
 
 def _run(root: Path, method: str, task: str, seed: int, minutes: int, resumed: bool = False) -> dict:
+    """A finished run of ``minutes``; resumed: its first process logged events until minute 8, stopped, and a second
+    started at minute 30 (a pause of 22 minutes that the table leaves out)."""
     run = root / "suite" / method / task / f"seed{seed}"
     run.mkdir(parents=True)
-    info = {"time": "2026-11-29T00:00:00+00:00", "finished": {"time": f"2026-11-29T00:{minutes:02d}:00+00:00"}}
+    info = {"time": _at(0)}
+    if resumed:
+        info["resumed"] = [{"time": _at(30), "update": 5}]
+        _log_events(run, [_at(5), _at(8)])
+    info["finished"] = {"time": _at(minutes + 22 * resumed)}
     (run / "run_info.json").write_text(json.dumps(info))
-    (run / "stdout.log").write_text("resuming from update 5 of 10\n" if resumed else "training 10 updates\n")
     env_id = {"cue": "ProofOfMemory-v0", "emp": "Endless-MysteryPath-v0"}[task]
     return {"run": f"suite/{method}/{task}/seed{seed}", "method": method, "task": task, "env_id": env_id}
+
+
+def _at(minute: int) -> str:
+    return f"2026-11-29T00:{minute:02d}:00+00:00"
+
+
+def _log_events(run_dir: Path, times: list[str]) -> None:
+    from torch.utils.tensorboard import SummaryWriter
+
+    writer = SummaryWriter(log_dir=str(run_dir))
+    for step, time in enumerate(times):
+        writer.add_scalar("charts/episodic_return", 0.5, step, walltime=datetime.fromisoformat(time).timestamp())
+    writer.close()
+
+
+def test_a_resumed_runs_minutes_leave_out_its_pauses(tmp_path: Path) -> None:
+    _run(tmp_path, "gru", "cue", 0, 20, resumed=True)
+    assert run_minutes(tmp_path / "suite/gru/cue/seed0") == (20.0, True)
+    run = tmp_path / "suite/gru/cue/seed1"  # stopped before it logged anything: its first process counts nothing
+    run.mkdir(parents=True)
+    info = {"time": _at(0), "resumed": [{"time": _at(30)}], "finished": {"time": _at(45)}}
+    (run / "run_info.json").write_text(json.dumps(info))
+    assert run_minutes(run) == (15.0, True)
+    del info["finished"]
+    (run / "run_info.json").write_text(json.dumps(info))
+    assert run_minutes(run) is None
 
 
 def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_path: Path, capsys) -> None:
@@ -47,7 +80,9 @@ def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_
     assert lines[2] == "| PPO | 0.50 [0.40, 0.60] | 2.25 [2.15, 2.35] | 0.20 [0.10, 0.30] | 0.25 [0.00, 0.50] |"
     assert lines[3] == "| GRU-PPO | 0.90 [0.80, 1.00] | 3.00 [2.90, 3.10] (1 run) | 0.80 [0.70, 0.90] |  |"
     assert "| PPO | 10-11 (2) | 10-11 (2) |" in lines and "| GRU-PPO | 20 (2), 1 resumed | 40 (1) |" in lines
-    assert lines[-1] == "Minutes per run, start to finish (runs). All runs: 2.0 run-hours."
+    assert (
+        lines[-1] == "Minutes per run, start to finish less the pauses of resumed runs (runs). All runs: 2.0 run-hours."
+    )
     assert (tmp_path / "table.md").read_text().splitlines() == lines
     assert results_table.main([str(tmp_path / "none")]) == 2
 
