@@ -5,8 +5,10 @@ column per task with the IQM of the final novel-seed metric and its 95% stratifi
 evaluated step of that method on that task; the runs counted where fewer than the panel's most), and for a panel of
 several tasks the aggregate across the tasks whose runs have all finished (IQM of the normalised scores with its
 interval, and the probability of improvement over the reference, GRU-PPO). A second table gives each run's wall
-time from ``run_info.json`` and its TensorBoard event files: start to finish, less the pauses of a run stopped and
-resumed (marked; each of its processes ends at the last event it logged). ``--out FILE`` also writes both tables.
+time from ``run_info.json``: start to finish, less the pauses of a run stopped and resumed (marked). A process that
+was stopped ends at the time ``run_info.json`` records (``stopped``), else at the last event it wrote to the run's
+TensorBoard files, else (neither is committed with a run made before the record existed) after its updates at the
+pace of the run's timed processes (marked estimated). ``--out FILE`` also writes both tables.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from collections import defaultdict
 from datetime import datetime
 from itertools import pairwise
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from agents.analysis.metrics import metric_of
 from agents.analysis.plots import method_colors, method_label
@@ -81,23 +83,54 @@ def scores_table(summary: dict[str, Any], digits: int = 2) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_minutes(run_dir: Path) -> tuple[float, bool] | None:
-    """(minutes the run trained, whether it was resumed) of a finished run, else None.
+class RunTime(NamedTuple):
+    """A finished run's minutes of training, whether it was resumed, and whether a process's end was estimated."""
+
+    minutes: float
+    resumed: bool
+    estimated: bool = False
+
+
+def run_minutes(run_dir: Path) -> RunTime | None:
+    """The training time of a finished run, else None.
 
     A run's processes start at ``run_info.json``'s ``time`` and at each ``resumed`` time; the last ends at
-    ``finished``, every earlier one at the last event it wrote to the run's TensorBoard files (a process that wrote
-    none counts nothing), so the hours between a stop and the resume are left out."""
+    ``finished``, every earlier one at its ``stopped`` time, else at the last event it wrote to the run's TensorBoard
+    files, so the hours between a stop and the resume are left out. A process with neither is counted at the pace
+    (minutes per update) of the run's timed processes, from the updates it added (``resumed`` entries' ``update``),
+    and the result is marked estimated; without those update counts it counts nothing."""
     info_path = run_dir / "run_info.json"
     if not info_path.is_file():
         return None
     info = json.loads(info_path.read_text())
     if not info.get("finished"):
         return None
-    starts = [_seconds(info["time"])] + [_seconds(entry["time"]) for entry in info.get("resumed", [])]
+    resumed = info.get("resumed", [])
+    starts = [_seconds(info["time"])] + [_seconds(entry["time"]) for entry in resumed]
+    stopped = [_seconds(entry["time"]) for entry in info.get("stopped", [])]
     logged = event_wall_times(run_dir) if len(starts) > 1 else []
-    ends = [max((t for t in logged if start <= t < stop), default=start) for start, stop in pairwise(starts)]
+    ends: list[float | None] = []
+    for start, next_start in pairwise(starts):
+        recorded = [t for t in stopped if start <= t < next_start] or [t for t in logged if start <= t < next_start]
+        ends.append(max(recorded) if recorded else None)
     ends.append(_seconds(info["finished"]["time"]))
-    return sum(end - start for start, end in zip(starts, ends, strict=True)) / 60, len(starts) > 1
+    first_updates = [0] + [entry.get("update") for entry in resumed]
+    last_updates = first_updates[1:] + [info["finished"].get("update")]
+    spans = [
+        None if first is None or last is None else last - first
+        for first, last in zip(first_updates, last_updates, strict=True)
+    ]
+    timed = [(end - start, span) for start, end, span in zip(starts, ends, spans, strict=True) if end is not None]
+    timed_updates = sum(span for _, span in timed if span)
+    pace = sum(seconds for seconds, span in timed if span) / timed_updates if timed_updates else None
+    seconds, estimated = 0.0, False
+    for start, end, span in zip(starts, ends, spans, strict=True):
+        if end is not None:
+            seconds += end - start
+        elif span and pace is not None:
+            seconds += span * pace
+            estimated = True
+    return RunTime(seconds / 60, len(starts) > 1, estimated)
 
 
 def _seconds(iso_time: str) -> float:
@@ -117,7 +150,7 @@ def event_wall_times(run_dir: Path) -> list[float]:
 
 def wall_time_table(summary: dict[str, Any], root: Path) -> str:
     """Per method and task: the fastest and slowest run's minutes and the number of runs."""
-    times: dict[tuple[str, str], list[tuple[float, bool]]] = defaultdict(list)
+    times: dict[tuple[str, str], list[RunTime]] = defaultdict(list)
     named = {run["run"]: (run["method"], run["task"]) for run in summary["runs"]}  # one entry per run and step
     for name, key in named.items():
         found = run_minutes(root / name)
@@ -130,19 +163,28 @@ def wall_time_table(summary: dict[str, Any], root: Path) -> str:
         cells = []
         for task in tasks:
             found = times.get((method, task), [])
-            total += sum(minutes for minutes, _ in found)
+            total += sum(time.minutes for time in found)
             if not found:
                 cells.append("")
                 continue
-            low, high = min(m for m, _ in found), max(m for m, _ in found)
+            low, high = min(time.minutes for time in found), max(time.minutes for time in found)
             span = f"{low:.0f}" if round(low) == round(high) else f"{low:.0f}-{high:.0f}"
-            resumed = sum(r for _, r in found)
-            cells.append(f"{span} ({len(found)})" + (f", {resumed} resumed" if resumed else ""))
+            resumed, estimated = sum(time.resumed for time in found), sum(time.estimated for time in found)
+            cells.append(
+                f"{span} ({len(found)})"
+                + (f", {resumed} resumed" if resumed else "")
+                + (f" ({estimated} estimated)" if estimated else "")
+            )
         lines.append(f"| {method_label(method)} | " + " | ".join(cells) + " |")
     lines.append(
         f"\nMinutes per run, start to finish less the pauses of resumed runs (runs). All runs: {total / 60:.1f}"
         " run-hours."
     )
+    if any(time.estimated for found in times.values() for time in found):
+        lines.append(
+            "Estimated: a resumed run one of whose processes left no stop time in the run's committed records (made"
+            " before run_info.json recorded it), counted at the pace of its timed processes."
+        )
     return "\n".join(lines) + "\n"
 
 

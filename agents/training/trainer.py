@@ -262,6 +262,8 @@ class Trainer:
                         saved = saved or self._checkpoint()
                         signum = stops.received
                         if not stops.pass_on():  # no earlier handler (submitit's) took it over: stop here
+                            with self._writing(self.run_dir / "run_info.json"):
+                                self._mark_stopped(signum)
                             raise Preempted(
                                 f"stopped by {signal_name(signum)} after update {self.update} of {self.num_updates};"
                                 f" checkpoint {saved} written: resume with scripts/train.py --resume {self.run_dir}",
@@ -548,6 +550,14 @@ class Trainer:
         info_path = self.run_dir / "run_info.json"
         info = json.loads(info_path.read_text())
         info["finished"] = {"time": now(), "update": self.update, "step": self.global_step}
+        write_json_atomic(info_path, info, sort_keys=False)
+
+    def _mark_stopped(self, signum: int) -> None:
+        """Say in run_info.json when and where this process stopped: the committed records then tell a run's wall
+        time less its pauses (TensorBoard's event files, the other witness, are not committed)."""
+        info_path = self.run_dir / "run_info.json"
+        info = json.loads(info_path.read_text())
+        info.setdefault("stopped", []).append({"time": now(), "update": self.update, "signal": signal_name(signum)})
         write_json_atomic(info_path, info, sort_keys=False)
 
     def _write_run_files(self) -> None:

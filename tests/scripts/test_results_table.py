@@ -16,15 +16,15 @@ def _entry(method: str, task: str, step: int, iqm: float, runs: int = 2) -> dict
 
 
 def _run(root: Path, method: str, task: str, seed: int, minutes: int, resumed: bool = False) -> dict:
-    """A finished run of ``minutes``; resumed: its first process logged events until minute 8, stopped, and a second
-    started at minute 30 (a pause of 22 minutes that the table leaves out)."""
+    """A finished run of ``minutes`` and 15 updates; resumed: its first process made 5 updates and logged events
+    until minute 8, stopped, and a second started at minute 30 (a pause of 22 minutes that the table leaves out)."""
     run = root / "suite" / method / task / f"seed{seed}"
     run.mkdir(parents=True)
     info = {"time": _at(0)}
     if resumed:
         info["resumed"] = [{"time": _at(30), "update": 5}]
         _log_events(run, [_at(5), _at(8)])
-    info["finished"] = {"time": _at(minutes + 22 * resumed)}
+    info["finished"] = {"time": _at(minutes + 22 * resumed), "update": 15}
     (run / "run_info.json").write_text(json.dumps(info))
     env_id = {"cue": "ProofOfMemory-v0", "emp": "Endless-MysteryPath-v0"}[task]
     return {"run": f"suite/{method}/{task}/seed{seed}", "method": method, "task": task, "env_id": env_id}
@@ -45,15 +45,33 @@ def _log_events(run_dir: Path, times: list[str]) -> None:
 
 def test_a_resumed_runs_minutes_leave_out_its_pauses(tmp_path: Path) -> None:
     _run(tmp_path, "gru", "cue", 0, 20, resumed=True)
-    assert run_minutes(tmp_path / "suite/gru/cue/seed0") == (20.0, True)
+    assert run_minutes(tmp_path / "suite/gru/cue/seed0") == (20.0, True, False)
     run = tmp_path / "suite/gru/cue/seed1"  # stopped before it logged anything: its first process counts nothing
     run.mkdir(parents=True)
     info = {"time": _at(0), "resumed": [{"time": _at(30)}], "finished": {"time": _at(45)}}
     (run / "run_info.json").write_text(json.dumps(info))
-    assert run_minutes(run) == (15.0, True)
+    assert run_minutes(run) == (15.0, True, False)
     del info["finished"]
     (run / "run_info.json").write_text(json.dumps(info))
     assert run_minutes(run) is None
+
+
+def test_a_recorded_stop_ends_a_process_and_without_one_its_updates_are_counted_at_the_runs_pace(
+    tmp_path: Path,
+) -> None:
+    run = tmp_path / "suite/gru/cue/seed0"
+    run.mkdir(parents=True)
+    # 10 updates in a first process, stopped at minute 6 (an event at minute 9 is a later, killed process's), resumed
+    # at minute 30, 20 more updates to minute 42: 6 + 12 minutes; without the stop time, 10 updates at 0.6 a minute
+    info = {"time": _at(0), "resumed": [{"time": _at(30), "update": 10}], "finished": {"time": _at(42), "update": 30}}
+    (run / "run_info.json").write_text(json.dumps(info | {"stopped": [{"time": _at(6), "update": 10}]}))
+    _log_events(run, [_at(5), _at(9)])
+    assert run_minutes(run) == (18.0, True, False)
+    (run / "run_info.json").write_text(json.dumps(info))
+    assert run_minutes(run) == (21.0, True, False)  # the last event ends it
+    for path in run.glob("events.out.tfevents.*"):
+        path.unlink()  # what a fresh clone of committed records holds
+    assert run_minutes(run) == (18.0, True, True)
 
 
 def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_path: Path, capsys) -> None:
@@ -84,6 +102,12 @@ def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_
         lines[-1] == "Minutes per run, start to finish less the pauses of resumed runs (runs). All runs: 2.0 run-hours."
     )
     assert (tmp_path / "table.md").read_text().splitlines() == lines
+    for path in (tmp_path / "suite/gru/cue/seed0").glob("events.out.tfevents.*"):
+        path.unlink()  # its first process's end now known from nothing: counted at the run's pace, and said so
+    assert results_table.main([str(results)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "| GRU-PPO | 18-20 (2), 1 resumed (1 estimated) | 40 (1) |" in lines  # 5 updates at 12 minutes per 10
+    assert lines[-1].startswith("Estimated: a resumed run one of whose processes left no stop time")
     assert results_table.main([str(tmp_path / "none")]) == 2
 
 

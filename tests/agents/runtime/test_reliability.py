@@ -21,6 +21,7 @@ import pytest
 import torch
 import yaml
 
+from agents.cli.results_table import run_minutes
 from agents.config import config_from_dict
 from agents.evaluation import runs as evaluation_runs
 from agents.evaluation.records import read_records
@@ -336,8 +337,12 @@ def test_a_preempted_run_checkpoints_exits_76_and_resumes_bit_for_bit(
     assert stopped.returncode == EXIT_PREEMPTED == 76, stopped.stderr
     assert f"pre-empted: stopped by {name} after update 3 of 6" in stopped.stderr
     assert latest_checkpoint(run_dir).name == "update_0000003.pt"  # the update in progress finished, then saved
+    (stop,) = json.loads((run_dir / "run_info.json").read_text())["stopped"]  # the committed records' stop time
+    assert (stop["update"], stop["signal"]) == (3, name)
     Trainer.resume(run_dir).train()
     _assert_same_run(uninterrupted, run_dir)
+    timed = run_minutes(run_dir)
+    assert timed is not None and timed.resumed and not timed.estimated
 
 
 @pytest.mark.slow
