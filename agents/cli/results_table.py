@@ -120,9 +120,8 @@ def run_minutes(run_dir: Path) -> RunTime | None:
         None if first is None or last is None else last - first
         for first, last in zip(first_updates, last_updates, strict=True)
     ]
-    timed = [(end - start, span) for start, end, span in zip(starts, ends, spans, strict=True) if end is not None]
-    timed_updates = sum(span for _, span in timed if span)
-    pace = sum(seconds for seconds, span in timed if span) / timed_updates if timed_updates else None
+    timed = [(end - start, span) for start, end, span in zip(starts, ends, spans, strict=True) if end and span]
+    pace = sum(seconds for seconds, _ in timed) / sum(span for _, span in timed) if timed else None
     seconds, estimated = 0.0, False
     for start, end, span in zip(starts, ends, spans, strict=True):
         if end is not None:

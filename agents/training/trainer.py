@@ -34,7 +34,7 @@ import random
 import sys
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -547,17 +547,21 @@ class Trainer:
     def _mark_finished(self) -> None:
         """Say in run_info.json that the run is complete: a sweep then knows it without the checkpoints (which a
         committed copy of the run directory leaves out)."""
-        info_path = self.run_dir / "run_info.json"
-        info = json.loads(info_path.read_text())
-        info["finished"] = {"time": now(), "update": self.update, "step": self.global_step}
-        write_json_atomic(info_path, info, sort_keys=False)
+        self._edit_run_info(
+            lambda info: info.update(finished={"time": now(), "update": self.update, "step": self.global_step})
+        )
 
     def _mark_stopped(self, signum: int) -> None:
         """Say in run_info.json when and where this process stopped: the committed records then tell a run's wall
         time less its pauses (TensorBoard's event files, the other witness, are not committed)."""
+        stop = {"time": now(), "update": self.update, "signal": signal_name(signum)}
+        self._edit_run_info(lambda info: info.setdefault("stopped", []).append(stop))
+
+    def _edit_run_info(self, change: Callable[[dict[str, Any]], object]) -> None:
+        """Apply ``change`` to run_info.json's contents and write it back atomically."""
         info_path = self.run_dir / "run_info.json"
         info = json.loads(info_path.read_text())
-        info.setdefault("stopped", []).append({"time": now(), "update": self.update, "signal": signal_name(signum)})
+        change(info)
         write_json_atomic(info_path, info, sort_keys=False)
 
     def _write_run_files(self) -> None:
