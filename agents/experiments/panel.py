@@ -14,9 +14,10 @@ from typing import Any
 from agents.experiments.planning import Echo, Panel, SweepError, SweepRun
 from agents.experiments.state import FINISHED, RunStatus, statuses
 from agents.policy.checkpoint import checkpoint_update, finished_update, latest_checkpoint
-from agents.runtime.io import atomic_write_text, provenance, write_json_atomic
+from agents.runtime.io import atomic_write_text, exclusive_lock, provenance, write_json_atomic
 
 FINAL_EVALUATION = "evaluation"  # <run>/evaluation: the final evaluation, as scripts/evaluate.py writes it
+RESULTS_LOCK = ".lock"  # in the results directory: held while a process evaluates the panel and writes its results
 
 
 def final_evaluation(run: SweepRun, device: str = "cpu") -> list[dict[str, Any]]:
@@ -69,17 +70,30 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
     * ``plots/``: the curves and final-performance figures of :func:`agents.analysis.plots.plot_results`, and for
       several tasks ``across_tasks.png/.pdf``.
 
-    Runs not finished are left out (and listed). Returns the results directory."""
+    Runs not finished are left out (and listed). Two processes that evaluate one panel at once (two sweeps on one root
+    finishing together) take turns, and each reads the runs' states in its turn, so the one that writes last has seen
+    every run the other saw finished. Returns the results directory."""
+    _check_some_finished(panel, statuses(panel.runs))
+    with exclusive_lock(panel.results_dir / RESULTS_LOCK):
+        return _evaluate_finished(panel, device=device, plots=plots, echo=echo)
+
+
+def _check_some_finished(panel: Panel, found: Sequence[RunStatus]) -> None:
+    if not any(s.state == FINISHED for s in found):
+        raise SweepError(f"{panel.name}: no finished run to evaluate ({len(found)} not finished)")
+
+
+def _evaluate_finished(panel: Panel, *, device: str, plots: bool, echo: Echo) -> Path:
+    """:func:`evaluate_panel`'s work, with the panel's results lock held."""
     from agents.analysis.across_tasks import across_tasks
     from agents.analysis.results import TRAINING_COLUMNS, read_episodes
     from agents.analysis.scores import summarize
     from agents.evaluation.records import read_records, write_records
 
     found = statuses(panel.runs)
+    _check_some_finished(panel, found)
     finished = [s.run for s in found if s.state == FINISHED]
     unfinished = [s.run.name for s in found if s.state != FINISHED]
-    if not finished:
-        raise SweepError(f"{panel.name}: no finished run to evaluate ({len(unfinished)} not finished)")
     records: list[dict[str, Any]] = []
     rows: list[dict[str, Any]] = []
     for index, run in enumerate(finished, 1):

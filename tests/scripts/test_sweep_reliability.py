@@ -1,5 +1,6 @@
 """scripts/sweep.py under faults, for real: SIGTERM to the local launcher (every running run checkpoints, the sweep
-exits 76 and the same command resumes it), and two sweeps on one root at once (no run trained twice)."""
+exits 76 and the same command resumes it), two sweeps on one root at once (no run trained twice), and two
+evaluations of one panel at once (they take turns)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -17,9 +19,11 @@ import pytest
 import yaml
 
 from agents.experiments.launchers import train_run
-from agents.experiments.planning import load_panel
+from agents.experiments.panel import RESULTS_LOCK, evaluate_panel
+from agents.experiments.planning import SweepError, load_panel
 from agents.experiments.state import FINISHED, prepare_run, run_lock, run_status
 from agents.policy.checkpoint import checkpoint_update, latest_checkpoint
+from agents.runtime.io import exclusive_lock
 from agents.runtime.preemption import EXIT_PREEMPTED
 from scripts import sweep as sweep_script
 from tests.support.tiny_run import tiny_run, with_run
@@ -113,3 +117,35 @@ def test_a_busy_run_is_left_alone_and_its_holder_named(tmp_path: Path) -> None:
         f"{run.run_dir}: another process ({socket.gethostname()} pid {os.getpid()}) is training this run; leaving it"
     ]
     assert not (run.run_dir / "checkpoints").exists()
+
+
+def test_two_evaluations_of_one_panel_take_turns(tmp_path: Path) -> None:
+    """Two sweeps that finish together both evaluate the panel: the second waits for the first's lock and reads the
+    runs' states in its turn, so the results it writes last hold every run finished by then."""
+    config = tmp_path / "turns.yaml"
+    evaluation = {"interval": 3, "seeds": [100_000, 100_002], "repetitions": 1}
+    config.write_text(
+        yaml.safe_dump(
+            {**tiny_run({"epochs": 1, "minibatches": 1}, TINY["run"], evaluation), "grid": {"run.seed": [0, 1]}},
+            sort_keys=False,
+        )
+    )
+    panel = load_panel(config, root=tmp_path / "runs")
+    with pytest.raises(SweepError, match="turns: no finished run to evaluate \\(2 not finished\\)"):
+        evaluate_panel(panel, plots=False, echo=lambda _: None)
+    assert not panel.results_dir.exists()  # a refusal leaves nothing behind, not even the lock's file
+    first, second = panel.runs
+    prepare_run(first)
+    assert train_run(first.run_dir, echo=lambda _: None) == "trained"
+
+    waiting = threading.Thread(target=evaluate_panel, args=(panel,), kwargs={"plots": False, "echo": lambda _: None})
+    with exclusive_lock(panel.results_dir / RESULTS_LOCK):  # another process evaluating the panel
+        waiting.start()
+        prepare_run(second)  # a run that finishes while the other evaluation holds the lock
+        assert train_run(second.run_dir, echo=lambda _: None) == "trained"
+        time.sleep(0.2)
+        assert waiting.is_alive() and not (panel.results_dir / "summary.json").exists()
+    waiting.join(timeout=120)
+    assert not waiting.is_alive()
+    summary = json.loads((panel.results_dir / "summary.json").read_text())
+    assert summary["unfinished"] == [] and {run["run"] for run in summary["runs"]} == {first.name, second.name}
