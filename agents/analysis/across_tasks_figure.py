@@ -8,6 +8,7 @@ bands. Method colours and labels are those of every other figure (:mod:`agents.a
 from __future__ import annotations
 
 import json
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,6 +23,7 @@ if TYPE_CHECKING:
 
 __all__ = ["across_tasks_figure", "plot_across_tasks"]
 
+TITLE_CHARACTERS_PER_INCH = 12  # at fontsize 10, a little under the narrowest a line of text can be
 PANELS = (("iqm", "IQM"), ("mean", "Mean"), ("optimality_gap", "Optimality gap"))
 
 
@@ -77,11 +79,10 @@ def across_tasks_figure(summary: Mapping[str, Any], colors: Mapping[str, str] | 
     tasks = ", ".join(summary["tasks"])
     waiting = summary.get("tasks_in_progress") or {}
     left = f"\n(left out while their runs train: {', '.join(sorted(waiting))})" if waiting else ""
-    figure.suptitle(
-        f"Across {len(summary['tasks'])} tasks ({tasks}): final scores normalised per task; {summary['interval']}"
-        + left,
-        fontsize=10,
-    )
+    # Wrapped to the figure's width: a title wider than the figure is cut off at both sides, not shrunk.
+    width = int(figure.get_figwidth() * TITLE_CHARACTERS_PER_INCH)
+    lines = [f"Across {len(summary['tasks'])} tasks ({tasks}): final scores normalised per task", summary["interval"]]
+    figure.suptitle("\n".join(textwrap.fill(line, width) for line in lines) + left, fontsize=10)
     return figure
 
 

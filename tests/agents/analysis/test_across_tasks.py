@@ -191,6 +191,22 @@ def test_the_figure_shows_every_aggregate(tmp_path) -> None:
     assert png.stat().st_size > 10_000
 
 
+def test_the_figures_title_fits_its_width_however_many_tasks() -> None:
+    from agents.analysis.across_tasks_figure import across_tasks_figure
+
+    for count in (2, 4, 12):
+        tasks = {f"task_with_a_long_name_{k}": "ProofOfMemory-v0" for k in range(count)}
+        summary = aggregate.across_tasks(
+            _panel({"ppo": 0.5, "gru": 1.0}, tasks, runs=2), reps=20, options={task: {} for task in tasks}
+        )
+        figure = across_tasks_figure(summary)
+        figure.canvas.draw()
+        title = figure._suptitle
+        extent = title.get_window_extent()
+        assert 0 <= extent.x0 and extent.x1 <= figure.bbox.width, (count, extent, figure.bbox.width)
+        assert all(task in title.get_text().replace("\n", " ") for task in tasks)
+
+
 def test_the_figure_leaves_out_the_tasks_a_summary_names_in_progress(tmp_path) -> None:
     import json
 
