@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 __all__ = ["across_tasks_figure", "plot_across_tasks"]
 
-TITLE_CHARACTERS_PER_INCH = 12  # at fontsize 10, a little under the narrowest a line of text can be
+TITLE_CHARACTERS_PER_INCH = 12  # of figure width, at fontsize 10: erring narrow, so that a wrapped line fits
 PANELS = (("iqm", "IQM"), ("mean", "Mean"), ("optimality_gap", "Optimality gap"))
 
 
