@@ -109,9 +109,15 @@ def run_minutes(run_dir: Path) -> RunTime | None:
     starts = [_seconds(info["time"])] + [_seconds(entry["time"]) for entry in resumed]
     stopped = [_seconds(entry["time"]) for entry in info.get("stopped", [])]
     logged = event_wall_times(run_dir) if len(starts) > 1 else []
+    unclaimed = sorted(stopped)
     ends: list[float | None] = []
     for start, next_start in pairwise(starts):
-        recorded = [t for t in stopped if start <= t < next_start] or [t for t in logged if start <= t < next_start]
+        # The times are whole seconds: a process stopped in the second the next one started stopped before it, so
+        # its stop may equal the next start. A process stops once: the first stop not yet taken in its span is its own.
+        own = [t for t in unclaimed if start <= t <= next_start][:1]
+        if own:
+            unclaimed.remove(own[0])
+        recorded = own or [t for t in logged if start <= t < next_start]
         ends.append(max(recorded) if recorded else None)
     ends.append(_seconds(info["finished"]["time"]))
     first_updates = [0] + [entry.get("update") for entry in resumed]

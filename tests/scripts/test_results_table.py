@@ -74,6 +74,20 @@ def test_a_recorded_stop_ends_a_process_and_without_one_its_updates_are_counted_
     assert run_minutes(run) == (18.0, True, True)
 
 
+def test_a_stop_in_the_second_the_next_process_started_ends_the_earlier_process(tmp_path: Path) -> None:
+    """run_info.json's times are whole seconds: a run stopped and resumed at once records both at the same second."""
+    run = tmp_path / "suite/gru/cue/seed0"
+    run.mkdir(parents=True)
+    info = {
+        "time": _at(0),
+        "stopped": [{"time": _at(6), "update": 10}, {"time": _at(9), "update": 15}],
+        "resumed": [{"time": _at(6), "update": 10}, {"time": _at(9), "update": 15}],  # each at its stop's second
+        "finished": {"time": _at(21), "update": 30},
+    }
+    (run / "run_info.json").write_text(json.dumps(info))
+    assert run_minutes(run) == (6.0 + 3.0 + 12.0, True, False)  # nothing estimated: every stop is recorded
+
+
 def test_the_table_has_a_row_per_method_a_column_per_task_and_the_aggregate(tmp_path: Path, capsys) -> None:
     runs = [_run(tmp_path, "ppo", task, seed, 10 + seed) for task in ("cue", "emp") for seed in (0, 1)]
     runs += runs[:1]  # a run is listed once per evaluated step
