@@ -114,10 +114,12 @@ def run_minutes(run_dir: Path) -> RunTime | None:
     for start, next_start in pairwise(starts):
         # The times are whole seconds: a process stopped in the second the next one started stopped before it, so
         # its stop may equal the next start. A process stops once: the first stop not yet taken in its span is its own.
-        own = [t for t in unclaimed if start <= t <= next_start][:1]
-        if own:
-            unclaimed.remove(own[0])
-        recorded = own or [t for t in logged if start <= t < next_start]
+        own = next((t for t in unclaimed if start <= t <= next_start), None)
+        if own is not None:
+            unclaimed.remove(own)
+            ends.append(own)
+            continue
+        recorded = [t for t in logged if start <= t < next_start]
         ends.append(max(recorded) if recorded else None)
     ends.append(_seconds(info["finished"]["time"]))
     first_updates = [0] + [entry.get("update") for entry in resumed]
