@@ -70,9 +70,9 @@ def evaluate_panel(panel: Panel, *, device: str = "cpu", plots: bool = True, ech
     * ``plots/``: the curves and final-performance figures of :func:`agents.analysis.plots.plot_results`, and for
       several tasks ``across_tasks.png/.pdf``.
 
-    Runs not finished are left out (and listed). Two processes that evaluate one panel at once (two sweeps on one root
-    finishing together) take turns, and each reads the runs' states in its turn, so the one that writes last has seen
-    every run the other saw finished. Returns the results directory."""
+    Runs not finished are left out (and listed: by name, or per task when many). Two processes that evaluate one
+    panel at once (two sweeps on one root finishing together) take turns, and each reads the runs' states in its turn,
+    so the one that writes last has seen every run the other saw finished. Returns the results directory."""
     _check_some_finished(panel, statuses(panel.runs))
     with exclusive_lock(panel.results_dir / RESULTS_LOCK):
         return _evaluate_finished(panel, device=device, plots=plots, echo=echo)
@@ -132,9 +132,21 @@ def _evaluate_finished(panel: Panel, *, device: str, plots: bool, echo: Echo) ->
     if plots:
         _plot(out, echo)
     if unfinished:
-        echo(f"{panel.name}: {len(unfinished)} run(s) not finished and left out: {', '.join(unfinished)}")
+        echo(f"{panel.name}: {len(unfinished)} run(s) not finished and left out: {_named_briefly(unfinished, found)}")
     echo(f"{panel.name}: results in {out}")
     return out
+
+
+# Up to this many unfinished runs are named one by one; more (a one-run sweep or check on a fresh root) by task
+NAMED_ONE_BY_ONE = 8
+
+
+def _named_briefly(unfinished: Sequence[str], found: Sequence[RunStatus]) -> str:
+    """The unfinished runs by name, or, when there are many, per task (every name is in ``summary.json``)."""
+    if len(unfinished) <= NAMED_ONE_BY_ONE:
+        return ", ".join(unfinished)
+    by_task = "; ".join(f"{task}: {finished}" for task, finished in tasks_in_progress(found).items())
+    return f'{by_task} (named in summary.json\'s "unfinished")'
 
 
 def tasks_in_progress(found: Sequence[RunStatus]) -> dict[str, str]:

@@ -54,7 +54,8 @@ def test_local_sweep_trains_only_the_selected_cells_and_evaluates_the_whole_pane
     summary = json.loads((root / "cells" / "results" / "summary.json").read_text())
     assert {run["run"] for run in summary["runs"]} == {"cells/ppo/pom/seed1"}
     assert sorted(summary["unfinished"]) == ["cells/gru/pom/seed0", "cells/gru/pom/seed1", "cells/ppo/pom/seed0"]
-    capsys.readouterr()
+    named = "cells/ppo/pom/seed0, cells/gru/pom/seed0, cells/gru/pom/seed1"
+    assert f"cells: 3 run(s) not finished and left out: {named}" in capsys.readouterr().out  # a few, one by one
 
     # another cell: trained alone, and the panel's results gather both finished runs (never a part of the panel)
     assert sweep_script.main([*args, "--only", "method=gru,seed=0", "--evaluate"]) == 0
@@ -73,6 +74,21 @@ def test_local_sweep_trains_only_the_selected_cells_and_evaluates_the_whole_pane
     assert "panel cells: 3 runs selected by --only method=gru --only seed=1,method=ppo" in out
     rows = {line.split()[0]: line.split()[1] for line in out.splitlines() if line.startswith("  cells/")}
     assert rows == {"cells/ppo/pom/seed1": FINISHED, "cells/gru/pom/seed0": FINISHED, "cells/gru/pom/seed1": NEW}
+
+
+def test_many_runs_left_out_of_an_evaluation_are_counted_by_task(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """One run of a big grid evaluated alone (a one-run sweep, or scripts/check_run.py on its scratch root): the runs
+    left out are counted per task, not listed one by one; summary.json still names each."""
+    config, root = tmp_path / "many.yaml", tmp_path / "runs"
+    grid = {"task": {"short": {}, "long": {"env.options.delay": 4}}, "run.seed": list(range(5))}
+    config.write_text(yaml.safe_dump({**TINY, "grid": grid}, sort_keys=False))
+    assert sweep_script.main([str(config), "--root", str(root), "--only", "task=short,seed=0", "--evaluate"]) == 0
+    out = capsys.readouterr().out
+    counted = "many: 9 run(s) not finished and left out: short: 1 of 5 runs finished; long: 0 of 5 runs finished"
+    assert f'{counted} (named in summary.json\'s "unfinished")' in out
+    assert "many/gru/long/seed0" not in out
+    summary = json.loads((root / "many" / "results" / "summary.json").read_text())
+    assert len(summary["unfinished"]) == 9 and "many/gru/long/seed4" in summary["unfinished"]
 
 
 def test_a_bad_selection_exits_2_and_names_the_valid_values(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
