@@ -7,7 +7,7 @@ from __future__ import annotations
 import csv
 import io
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -125,14 +125,16 @@ def _evaluate_finished(panel: Panel, *, device: str, plots: bool, echo: Echo) ->
             **provenance(),
         },
     }
-    spanning = across_tasks(episodes, in_progress=tasks_in_progress(found))  # None for a panel of one task
+    in_progress = tasks_in_progress(found)
+    spanning = across_tasks(episodes, in_progress=in_progress)  # None for a panel of one task
     if spanning is not None:
         summary["across_tasks"] = spanning
     write_json_atomic(out / "summary.json", summary, sort_keys=False)
     if plots:
         _plot(out, echo)
     if unfinished:
-        echo(f"{panel.name}: {len(unfinished)} run(s) not finished and left out: {_named_briefly(unfinished, found)}")
+        left_out = _named_briefly(unfinished, in_progress)
+        echo(f"{panel.name}: {len(unfinished)} run(s) not finished and left out: {left_out}")
     echo(f"{panel.name}: results in {out}")
     return out
 
@@ -141,11 +143,12 @@ def _evaluate_finished(panel: Panel, *, device: str, plots: bool, echo: Echo) ->
 NAMED_ONE_BY_ONE = 8
 
 
-def _named_briefly(unfinished: Sequence[str], found: Sequence[RunStatus]) -> str:
-    """The unfinished runs by name, or, when there are many, per task (every name is in ``summary.json``)."""
+def _named_briefly(unfinished: Sequence[str], in_progress: Mapping[str, str]) -> str:
+    """The unfinished runs by name, or, when there are many, per task (:func:`tasks_in_progress`; every name is in
+    ``summary.json``)."""
     if len(unfinished) <= NAMED_ONE_BY_ONE:
         return ", ".join(unfinished)
-    by_task = "; ".join(f"{task}: {finished}" for task, finished in tasks_in_progress(found).items())
+    by_task = "; ".join(f"{task}: {finished}" for task, finished in in_progress.items())
     return f'{by_task} (named in summary.json\'s "unfinished")'
 
 
